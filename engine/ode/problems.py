@@ -1,0 +1,137 @@
+"""Reference problems with closed forms or trusted reference values (NUMERICS.md).
+
+Each :class:`Problem` carries a ``@ti.func`` derivative for :func:`engine.ode.solve`, an initial
+state, a time span and, where one exists, the exact solution. Constants are exactly representable
+so f64 runs are not polluted by f32-rounded literals.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+import taichi as ti
+
+
+@dataclass(frozen=True)
+class Problem:
+    name: str
+    f: Callable
+    y0: tuple
+    t_span: tuple
+    exact: Optional[Callable[[float], np.ndarray]] = None
+    reference_end: Optional[tuple] = None  # trusted y(t1) when there is no closed form
+    invariant: Optional[Callable[[np.ndarray], np.ndarray]] = None
+    second_order: bool = False  # y = (q, p): symplectic methods apply
+
+    def y_end(self) -> np.ndarray:
+        if self.exact is not None:
+            return np.asarray(self.exact(self.t_span[1]), dtype=np.float64)
+        return np.asarray(self.reference_end, dtype=np.float64)
+
+
+# x' = x (growth) and x' = −kx (decay), k = 0.5
+@ti.func
+def _growth(y, t):
+    return y
+
+
+@ti.func
+def _decay(y, t):
+    return -0.5 * y
+
+
+GROWTH = Problem("growth", _growth, (1.0,), (0.0, 1.0), exact=lambda t: np.array([np.exp(t)]))
+DECAY = Problem("decay", _decay, (1.0,), (0.0, 4.0), exact=lambda t: np.array([np.exp(-0.5 * t)]))
+
+
+# Harmonic oscillator q'' = −ω² q with ω = 2: y = (q, p)
+@ti.func
+def _oscillator(y, t):
+    d = y * 0
+    d[0] = y[1]
+    d[1] = -4.0 * y[0]
+    return d
+
+
+OSCILLATOR = Problem(
+    "oscillator", _oscillator, (1.0, 0.0), (0.0, 10.0), second_order=True,
+    exact=lambda t: np.array([np.cos(2 * t), -2 * np.sin(2 * t)]),
+    invariant=lambda y: 0.5 * y[1] ** 2 + 2.0 * y[0] ** 2,
+)
+
+
+# Projectile with linear drag (per component): x'' = g − (c/m) v with g = −9.8125 (exact in binary),
+# c/m = 0.5. y = (x, z, vx, vz)
+_G, _K = -9.8125, 0.5
+
+
+@ti.func
+def _drag(y, t):
+    d = y * 0
+    d[0] = y[2]
+    d[1] = y[3]
+    d[2] = -_K * y[2]
+    d[3] = _G - _K * y[3]
+    return d
+
+
+def _drag_exact(t, y0=(0.0, 0.0, 10.0, 10.0)):
+    tau = 1.0 / _K
+    out = []
+    for q0, v0, g in ((y0[0], y0[2], 0.0), (y0[1], y0[3], _G)):
+        vinf = g * tau
+        v = vinf + (v0 - vinf) * np.exp(-t / tau)
+        x = q0 + vinf * t + (v0 - vinf) * tau * (1 - np.exp(-t / tau))
+        out.append((x, v))
+    return np.array([out[0][0], out[1][0], out[0][1], out[1][1]])
+
+
+DRAG = Problem("projectile_drag", _drag, (0.0, 0.0, 10.0, 10.0), (0.0, 2.0), exact=_drag_exact,
+               second_order=True)
+
+
+# Lotka–Volterra with scipy's parameters (a, b, c, d) = (1.5, 1, 3, 1):
+#   x' = a x − b x y,  y' = −c y + d x y.
+# This is the system whose u(10) = (1.02634477, 0.90969108) and invariant
+# V = d x − c ln x + b y − a ln y = 2 at (1, 1) NUMERICS.md quotes (checked against DOP853 at
+# rtol 1e-13). NUMERICS.md's "x' = Ax − Bxy, y' = Cxy − Dy with (1.5, 1, 3, 1)" reads as
+# y' = 3xy − y, a different system (u(10) = (0.16536, 0.42667)); the figures are this one's.
+@ti.func
+def _lv(y, t):
+    d = y * 0
+    d[0] = 1.5 * y[0] - y[0] * y[1]
+    d[1] = y[0] * y[1] - 3.0 * y[1]
+    return d
+
+
+def _lv_invariant(y):
+    x, z = np.asarray(y[0]), np.asarray(y[1])
+    return x - 3.0 * np.log(x) + z - 1.5 * np.log(z)
+
+
+LOTKA_VOLTERRA = Problem(
+    "lotka-volterra", _lv, (1.0, 1.0), (0.0, 10.0),
+    reference_end=(1.02634477, 0.90969108), invariant=_lv_invariant,
+)
+
+
+# Kepler orbit, eccentricity 0.9: q0 = (0.1, 0), p0 = (0, √19), GM = 1, period 2π
+@ti.func
+def _kepler(y, t):
+    d = y * 0
+    r2 = y[0] * y[0] + y[1] * y[1]
+    inv_r3 = 1.0 / (r2 * ti.sqrt(r2))
+    d[0] = y[2]
+    d[1] = y[3]
+    d[2] = -y[0] * inv_r3
+    d[3] = -y[1] * inv_r3
+    return d
+
+
+KEPLER = Problem(
+    "kepler", _kepler, (0.1, 0.0, 0.0, float(np.sqrt(19.0))), (0.0, 2 * np.pi),
+    reference_end=(0.1, 0.0, 0.0, float(np.sqrt(19.0))), second_order=True,
+)
+
+PROBLEMS = {p.name: p for p in (GROWTH, DECAY, OSCILLATOR, DRAG, LOTKA_VOLTERRA, KEPLER)}

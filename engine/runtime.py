@@ -1,0 +1,60 @@
+"""The one place that calls ``ti.init``.
+
+Taichi allows one initialisation per process and every field and kernel belongs to it. The engine
+initialises lazily on first use; a host program that already called ``ti.init`` itself (a game with
+its own Taichi canvas) is detected and left alone.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+
+os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")  # no network check at import (PERF-NOTES)
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep stdout for our own output
+
+import taichi as ti  # noqa: E402
+
+ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")
+
+_state = {"arch": None}
+
+
+def _host_initialised() -> bool:
+    try:
+        from taichi.lang import impl
+
+        return impl.get_runtime().prog is not None
+    except Exception:  # pragma: no cover - private API moved
+        return False
+
+
+def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False) -> str:
+    """Initialise Taichi once for this process and return the arch in use.
+
+    ``arch`` is one of :data:`ARCHES`. Later calls are no-ops (a different arch after the first
+    call raises, since fields already allocated cannot move). ``threads`` caps CPU threads.
+    The offline cache stays on so a second run of the same scene starts fast.
+    """
+    if arch not in ARCHES:
+        raise ValueError(f"arch: unknown value {arch!r}; allowed: {', '.join(ARCHES)}")
+    if _state["arch"] is not None:
+        if arch != _state["arch"] and _state["arch"] != "host":
+            raise RuntimeError(f"Taichi already initialised with arch={_state['arch']}, not {arch}")
+        return _state["arch"]
+    if _host_initialised():
+        _state["arch"] = "host"
+        return "host"
+    kwargs = dict(arch=getattr(ti, arch), default_fp=ti.f32, offline_cache=True,
+                  log_level=ti.WARN, debug=debug, random_seed=0)
+    if threads and arch == "cpu":
+        kwargs["cpu_max_num_threads"] = int(threads)
+    with contextlib.redirect_stdout(io.StringIO()):  # "[Taichi] Starting on arch=..." banner
+        ti.init(**kwargs)
+    _state["arch"] = arch
+    return arch
+
+
+def ensure_init() -> str:
+    """Initialise with defaults unless already done (by the engine or by the host)."""
+    return _state["arch"] or init("cpu")
