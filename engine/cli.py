@@ -64,16 +64,44 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--t-end", type=float, default=None)
     o.add_argument("--points", type=int, default=20, help="output intervals")
     o.set_defaults(func=_cmd_ode)
+
+    r = sub.add_parser("run", help="simulate a config and render its frames off-screen")
+    r.add_argument("config")
+    r.add_argument("--frames", type=int, default=None, help="render this many frames")
+    r.add_argument("--out", default=None, help="output folder (default renders/<config name>)")
+    r.add_argument("--format", default="png", choices=["png", "gif", "mp4"])
+    r.add_argument("--size", default=None, help="image size WxH, e.g. 1280x720")
+    r.add_argument("--seed", type=int, default=None)
+    r.add_argument("--integrator", default=None,
+                   help="euler, midpoint, rk4, symplectic_euler or verlet")
+    r.add_argument("--overwrite", action="store_true", help="replace frames already in --out")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=lambda a: _commands().cmd_run(a))
+
+    v = sub.add_parser("validate", help="check configs: prints ok or one line per problem")
+    v.add_argument("configs", nargs="+")
+    v.set_defaults(func=lambda a: _commands().cmd_validate(a), no_taichi=True)
+
+    ls = sub.add_parser("list", help="list the configs and effect presets")
+    ls.add_argument("--dir", default="configs")
+    ls.set_defaults(func=lambda a: _commands().cmd_list(a), no_taichi=True)
     return ap
+
+
+def _commands():
+    from . import commands
+
+    return commands
 
 
 def main(argv=None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
     try:
-        from . import runtime
+        if not getattr(args, "no_taichi", False):
+            from . import runtime
 
-        runtime.init(getattr(args, "arch", "cpu"))
+            runtime.init(getattr(args, "arch", "cpu"))
         return args.func(args)
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)

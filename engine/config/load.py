@@ -1,0 +1,167 @@
+"""Read and validate scene configs; turn every problem into one line naming the key and value."""
+from __future__ import annotations
+
+import copy
+import difflib
+import os
+import sys
+import typing
+from typing import Any, List, Union
+
+from pydantic import BaseModel, ValidationError
+
+from .schema import Scene
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+class ConfigError(Exception):
+    """Bad input: ``problems`` holds one line per problem, each naming the key path and value."""
+
+    def __init__(self, problems: List[str]):
+        self.problems = problems
+        super().__init__("; ".join(problems))
+
+
+def _key_path(loc) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _model_at(loc) -> typing.Optional[type]:
+    """The model class whose fields live at ``loc`` (for suggesting a key), or None."""
+    tp: Any = Scene
+    for part in loc:
+        tp = _unwrap(tp)
+        if isinstance(part, int):
+            args = typing.get_args(tp)
+            tp = args[0] if args else None
+        elif isinstance(tp, type) and issubclass(tp, BaseModel) and part in tp.model_fields:
+            tp = tp.model_fields[part].annotation
+        elif typing.get_origin(tp) is Union:  # a tagged union: the part is the tag value
+            tp = next((a for a in typing.get_args(tp) if getattr(a, "__name__", "").lower()
+                       .startswith(str(part))), None)
+        else:
+            return None
+    tp = _unwrap(tp)
+    return tp if isinstance(tp, type) and issubclass(tp, BaseModel) else None
+
+
+def _unwrap(tp):
+    while True:
+        origin = typing.get_origin(tp)
+        if origin is typing.Annotated:
+            tp = typing.get_args(tp)[0]
+        elif origin is Union and type(None) in typing.get_args(tp):
+            tp = next(a for a in typing.get_args(tp) if a is not type(None))
+        else:
+            return tp
+
+
+def _short(v) -> str:
+    r = repr(v)
+    return r if len(r) <= 60 else r[:57] + "..."
+
+
+def format_errors(err: ValidationError) -> List[str]:
+    lines = []
+    for e in err.errors():
+        loc = list(e["loc"])
+        # drop the tag pydantic inserts for a tagged union: colliders[0].sphere.radius
+        clean = [p for i, p in enumerate(loc)
+                 if not (i > 0 and isinstance(loc[i - 1], int) and p in ("plane", "sphere"))]
+        path = _key_path(clean)
+        kind, msg = e["type"], e["msg"]
+        if kind == "extra_forbidden":
+            parent = _model_at([p for p in loc[:-1]])
+            names = list(parent.model_fields) if parent else []
+            near = difflib.get_close_matches(str(loc[-1]), names, n=1, cutoff=0.5)
+            hint = f"; did you mean {near[0]!r}?" if near else (
+                f"; valid keys: {', '.join(names)}" if names else "")
+            lines.append(f"{path}: unknown key{hint}")
+        elif kind == "value_error":
+            text = msg.removeprefix("Value error, ")
+            key, sep, rest = text.partition(": ")
+            if sep and " " not in key:
+                lines.append(f"{_key_path(clean + [key])}: {rest}")
+            else:
+                lines.append(f"{path or 'config'}: {text}")
+        elif kind == "missing":
+            lines.append(f"{path}: required key is missing")
+        elif kind == "union_tag_invalid" or kind == "union_tag_not_found":
+            lines.append(f"{path}.type: {_short(e.get('input', {}).get('type') if isinstance(e.get('input'), dict) else e.get('input'))} "
+                         f"is not allowed; expected 'plane' or 'sphere'")
+        else:
+            lines.append(f"{path}: {_short(e.get('input'))} is not allowed: {msg[0].lower() + msg[1:]}")
+    return lines
+
+
+def apply_presets(data: dict) -> dict:
+    """Fill each emitter from its ``effect`` preset (effects/<name>.py), key by key: what the
+    config says wins. Unknown preset names are reported like any bad value."""
+    from effects import PRESETS
+
+    data = copy.deepcopy(data)
+    problems = []
+    for i, em in enumerate(data.get("emitters", []) if isinstance(data.get("emitters"), list) else []):
+        if isinstance(em, dict) and "effect" in em:
+            name = em["effect"]
+            if not isinstance(name, str) or name not in PRESETS:
+                near = difflib.get_close_matches(str(name), list(PRESETS), n=1)
+                problems.append(f"emitters[{i}].effect: {_short(name)} is not a preset"
+                                + (f"; did you mean {near[0]!r}?" if near else "")
+                                + f" (presets: {', '.join(PRESETS)})")
+                continue
+            merged = copy.deepcopy(PRESETS[name].EMITTER)
+            merged.update(em)
+            data["emitters"][i] = merged
+    if problems:
+        raise ConfigError(problems)
+    return data
+
+
+def validate(data: dict) -> Scene:
+    if not isinstance(data, dict):
+        raise ConfigError([f"config: expected a table of keys, got {type(data).__name__}"])
+    data = apply_presets(data)
+    try:
+        return Scene.model_validate(data)
+    except ValidationError as e:
+        raise ConfigError(format_errors(e)) from None
+
+
+def read_toml(path: Union[str, os.PathLike]) -> dict:
+    p = os.fspath(path)
+    if not os.path.exists(p):
+        raise ConfigError([f"config: file not found: {p}"])
+    if os.path.isdir(p):
+        raise ConfigError([f"config: {p} is a directory, not a TOML file"])
+    try:
+        with open(p, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError([f"config: {p} is not valid TOML: {e}"]) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError([f"config: cannot read {p}: {e.__class__.__name__}: {e}"]) from None
+
+
+def load_config(path_or_dict, overrides: typing.Optional[dict] = None) -> Scene:
+    """A validated :class:`Scene` from a TOML path or a dict; ``overrides`` are dotted keys
+    (``{"solver.integrator": "rk4", "render.width": 320}``) applied before validation."""
+    data = read_toml(path_or_dict) if not isinstance(path_or_dict, dict) else copy.deepcopy(path_or_dict)
+    if isinstance(data, dict) and not data.get("name") and not isinstance(path_or_dict, dict):
+        data["name"] = os.path.splitext(os.path.basename(os.fspath(path_or_dict)))[0]
+    for key, value in (overrides or {}).items():
+        node = data
+        parts = key.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise ConfigError([f"{key}: cannot override inside a non-table value"])
+        node[parts[-1]] = value
+    return validate(data)

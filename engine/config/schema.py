@@ -1,0 +1,204 @@
+"""The scene config: strict models for what a TOML effect config may say.
+
+Every model forbids unknown keys (the error names the key and the nearest valid one), is strict
+about types (a string is not a number), and rejects NaN and Inf. Names follow established engines
+where they have one: Godot's ``lifetime``, ``lifetime_randomness``, ``spread``, ``one_shot``;
+Unity's rate over time (``rate``) and ``bursts``.
+
+Units: metres, seconds, degrees for angles; colours are linear RGB (values above 1 glow).
+"""
+from __future__ import annotations
+
+import math
+from typing import Annotated, List, Literal, Optional, Union
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+INTEGRATORS = ("euler", "midpoint", "rk4", "symplectic_euler", "verlet")
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False,
+                              validate_default=True)
+
+
+Vec3 = Annotated[List[float], Field(min_length=3, max_length=3)]
+Finite = Annotated[float, Field(ge=-1e6, le=1e6)]
+Positive = Annotated[float, Field(gt=0, le=1e6)]
+NonNeg = Annotated[float, Field(ge=0, le=1e6)]
+Fraction01 = Annotated[float, Field(ge=0, le=1)]
+# A curve over normalised life t ∈ [0, 1]: [[t, v...], ...] with t increasing.
+ColorStop = Annotated[List[Annotated[float, Field(ge=0, le=100)]], Field(min_length=4, max_length=4)]
+ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_length=2, max_length=2)]
+
+MAX_STOPS = 8
+
+
+def _check_curve(stops, name):
+    if stops is None:
+        return
+    if not 1 <= len(stops) <= MAX_STOPS:
+        raise ValueError(f"{name}: needs 1 to {MAX_STOPS} stops, got {len(stops)}")
+    ts = [s[0] for s in stops]
+    if any(t < 0 or t > 1 for t in ts) or any(b < a for a, b in zip(ts, ts[1:])):
+        raise ValueError(f"{name}: stop times must lie in [0, 1] and increase, got {ts}")
+
+
+class Keyframe(Strict):
+    """A point on a path: where something is at ``time`` (linear in between, held at the ends)."""
+
+    time: NonNeg
+    position: Vec3
+
+
+class Burst(Strict):
+    """``count`` particles at ``time``, repeated ``cycles`` times every ``interval`` seconds."""
+
+    time: NonNeg = 0.0
+    count: Annotated[int, Field(ge=1, le=10_000_000)]
+    cycles: Annotated[int, Field(ge=1, le=100_000)] = 1
+    interval: Positive = 1.0
+
+
+class Emitter(Strict):
+    name: str = ""
+    effect: Optional[str] = None  # a preset from effects/ that this emitter starts from
+    shape: Literal["point", "sphere", "box", "disc", "cone"] = "point"
+    position: Vec3 = [0.0, 0.0, 0.0]
+    path: List[Keyframe] = []
+    radius: NonNeg = 0.0  # sphere, disc and cone base
+    box_size: Vec3 = [1.0, 1.0, 1.0]
+    surface: bool = False  # sphere: emit from the surface instead of the volume
+    direction: Vec3 = [0.0, 1.0, 0.0]
+    spread: Annotated[float, Field(ge=0, le=180)] = 0.0  # half-angle of the emission cone, degrees
+    speed: Annotated[List[NonNeg], Field(min_length=2, max_length=2)] = [1.0, 1.0]  # [min, max] m/s
+    inherit_velocity: Annotated[float, Field(ge=-10, le=10)] = 0.0
+    rate: Annotated[float, Field(ge=0, le=1e8)] = 0.0  # particles per second
+    bursts: List[Burst] = []
+    start: NonNeg = 0.0  # emission window, seconds
+    stop: Optional[NonNeg] = None
+    lifetime: Annotated[float, Field(gt=0, le=1e4)] = 1.0
+    lifetime_randomness: Fraction01 = 0.0  # lifetime × (1 − randomness·u), u ∈ [0, 1)
+    drag: Optional[NonNeg] = None  # overrides forces.drag for this emitter's particles
+    capacity: Optional[Annotated[int, Field(ge=1, le=50_000_000)]] = None
+    # look
+    blend: Literal["additive", "alpha"] = "additive"
+    color: List[ColorStop] = [[0.0, 1.0, 1.0, 1.0]]  # [[t, r, g, b], ...] over life
+    alpha: List[ScalarStop] = [[0.0, 1.0]]  # [[t, a], ...]
+    size: List[ScalarStop] = [[0.0, 0.05]]  # [[t, diameter m], ...]
+    size_randomness: Fraction01 = 0.0
+    streak: NonNeg = 0.0  # draw a motion streak of streak × velocity (seconds)
+
+    @model_validator(mode="after")
+    def _check(self):
+        for name in ("color", "alpha", "size"):
+            _check_curve(getattr(self, name), name)
+        if self.speed[1] < self.speed[0]:
+            raise ValueError(f"speed: [min, max] needs min <= max, got {self.speed}")
+        if math.fsum(c * c for c in self.direction) < 1e-12:
+            raise ValueError(f"direction: must not be zero, got {self.direction}")
+        if self.stop is not None and self.stop < self.start:
+            raise ValueError(f"stop: {self.stop} is before start {self.start}")
+        if self.rate == 0 and not self.bursts:
+            raise ValueError("rate: an emitter needs a rate > 0 or at least one burst")
+        _check_path(self.path)
+        return self
+
+
+def _check_path(path):
+    ts = [k.time for k in path]
+    if any(b <= a for a, b in zip(ts, ts[1:])):
+        raise ValueError(f"path: keyframe times must increase, got {ts}")
+
+
+class _ColliderBase(Strict):
+    name: str = ""
+    restitution: Fraction01 = 0.5
+    friction: NonNeg = 0.0
+    kill: bool = False  # particles that touch it die
+    path: List[Keyframe] = []
+    visible: bool = True
+
+
+class PlaneCollider(_ColliderBase):
+    type: Literal["plane"]
+    point: Vec3 = [0.0, 0.0, 0.0]
+    normal: Vec3 = [0.0, 1.0, 0.0]
+
+    @model_validator(mode="after")
+    def _check(self):
+        if math.fsum(c * c for c in self.normal) < 1e-12:
+            raise ValueError(f"normal: must not be zero, got {self.normal}")
+        _check_path(self.path)
+        return self
+
+
+class SphereCollider(_ColliderBase):
+    type: Literal["sphere"]
+    center: Vec3 = [0.0, 0.0, 0.0]
+    radius: Annotated[float, Field(gt=0, le=1e5)] = 1.0
+
+    @model_validator(mode="after")
+    def _check(self):
+        _check_path(self.path)
+        return self
+
+
+Collider = Annotated[Union[PlaneCollider, SphereCollider], Field(discriminator="type")]
+
+
+class Camera(Strict):
+    position: Vec3 = [0.0, 2.0, 8.0]
+    look_at: Vec3 = [0.0, 1.0, 0.0]
+    fov: Annotated[float, Field(gt=1, lt=170)] = 45.0  # vertical, degrees
+
+
+class Solver(Strict):
+    integrator: Literal["euler", "midpoint", "rk4", "symplectic_euler", "verlet"] = "symplectic_euler"
+    h: Annotated[float, Field(gt=0, le=1.0)] = 1.0 / 120.0  # base (fixed) step, seconds
+    adaptive: bool = False  # step doubling
+    tolerance: Annotated[float, Field(gt=0, le=1.0)] = 1e-3  # rtol for step doubling
+    atol: Optional[Annotated[float, Field(gt=0, le=1.0)]] = None  # default: tolerance
+    max_steps_per_frame: Annotated[int, Field(ge=1, le=100_000)] = 1000
+
+
+class Forces(Strict):
+    gravity: Vec3 = [0.0, -9.81, 0.0]
+    drag: NonNeg = 0.0  # linear drag k: a = −k (v − wind), 1/s
+    wind: Vec3 = [0.0, 0.0, 0.0]  # air velocity seen by drag, m/s
+
+
+class Render(Strict):
+    width: Annotated[int, Field(ge=16, le=8192)] = 640
+    height: Annotated[int, Field(ge=16, le=8192)] = 360
+    exposure: Annotated[float, Field(gt=0, le=100)] = 1.0
+    background: Annotated[List[Annotated[float, Field(ge=0, le=1)]],
+                          Field(min_length=3, max_length=3)] = [0.02, 0.025, 0.035]
+    grid: bool = True
+    show_colliders: bool = True
+
+
+class Scene(Strict):
+    name: str = ""
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
+    fps: Annotated[float, Field(ge=1, le=1000)] = 30.0
+    duration: Optional[Annotated[float, Field(gt=0, le=3600)]] = None
+    frames: Optional[Annotated[int, Field(ge=1, le=1_000_000)]] = None
+    camera: Camera = Camera()
+    solver: Solver = Solver()
+    forces: Forces = Forces()
+    render: Render = Render()
+    emitters: Annotated[List[Emitter], Field(min_length=1, max_length=64)]
+    colliders: Annotated[List[Collider], Field(max_length=64)] = []
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.duration is not None and self.frames is not None:
+            raise ValueError("frames: give either duration or frames, not both")
+        return self
+
+    @property
+    def frame_count(self) -> int:
+        if self.frames is not None:
+            return self.frames
+        return max(1, round((self.duration if self.duration is not None else 4.0) * self.fps))

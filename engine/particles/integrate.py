@@ -1,0 +1,103 @@
+"""Particle stepping: the ODE core's steppers fused into one kernel per step.
+
+Each particle's state is y = (x, v) ∈ R⁶ with y' = (v, a(x, v, t)); the particles do not interact,
+so all stages of a method run in registers inside one parallel loop (PERF-NOTES: one fused RK4
+kernel is ~3× faster than stage kernels). Colliders and ageing run in the same kernel after the
+step. With step doubling, ``attempt`` writes a candidate and returns the max-norm error over live
+particles (a max is order-independent, so the result does not depend on threads); ``commit``
+accepts it.
+"""
+import taichi as ti
+
+from ..ode.steppers import doubling_step, is_finite, make_step, scaled_error
+
+NO_FAILURE = 1e30  # sentinel in nonfinite_t: no particle went non-finite (f32 inf does not survive a field write)
+
+
+@ti.func
+def _pack(x, v):
+    return ti.Vector([x[0], x[1], x[2], v[0], v[1], v[2]])
+
+
+class ParticleIntegrator:
+    def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False):
+        S = state
+        pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
+                                      S.particle_life, S.particle_alive)
+        cap = state.capacity
+        self.nonfinite_t = ti.field(ti.f32, shape=())
+        self.err = ti.field(ti.f32, shape=())
+        self.hits = ti.field(ti.i32, shape=())
+        self.nonfinite_t[None] = NO_FAILURE
+        bad_t, err, hits = self.nonfinite_t, self.err, self.hits
+        has_colliders = collide is not None
+
+        @ti.func
+        def deriv(y, t, i):
+            x = ti.Vector([y[0], y[1], y[2]])
+            v = ti.Vector([y[3], y[4], y[5]])
+            return _pack(v, accel(x, v, t, i))
+
+        @ti.func
+        def finish(i, x, v, t_end, h):
+            """Collide, age and retire one particle after an accepted step."""
+            if is_finite(x.sum() + v.sum()):
+                killed = 0
+                if ti.static(has_colliders):
+                    nx, nv, k, nh = collide(x, v)
+                    x, v, killed = nx, nv, k
+                    if nh > 0:
+                        ti.atomic_add(hits[None], nh)
+                pos[i] = x
+                vel[i] = v
+                a = age[i] + h
+                age[i] = a
+                if a >= life[i] or killed != 0:
+                    alive[i] = 0
+            else:
+                ti.atomic_min(bad_t[None], t_end)
+                alive[i] = 0
+
+        step = make_step(method, deriv, 6, ti.f32)
+
+        @ti.kernel
+        def step_fixed(t: ti.f32, h: ti.f32):
+            for i in range(cap):
+                if alive[i] != 0:
+                    y = step(_pack(pos[i], vel[i]), t, h, i)
+                    finish(i, ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[3], y[4], y[5]]), t + h, h)
+
+        self.step_fixed = step_fixed
+
+        if adaptive:
+            cpos, cvel = S.cand_pos, S.cand_vel
+            dstep = doubling_step(method, deriv, 6, ti.f32, extrapolate)
+
+            @ti.kernel
+            def attempt(t: ti.f32, h: ti.f32, atol: ti.f32, rtol: ti.f32) -> ti.f32:
+                err[None] = 0.0
+                for i in range(cap):
+                    if alive[i] != 0:
+                        y0 = _pack(pos[i], vel[i])
+                        y2, est = dstep(y0, t, h, i)
+                        cpos[i] = ti.Vector([y2[0], y2[1], y2[2]])
+                        cvel[i] = ti.Vector([y2[3], y2[4], y2[5]])
+                        ti.atomic_max(err[None], scaled_error(y0, y2, est, atol, rtol))
+                return err[None]
+
+            @ti.kernel
+            def commit(t: ti.f32, h: ti.f32):
+                for i in range(cap):
+                    if alive[i] != 0:
+                        finish(i, cpos[i], cvel[i], t + h, h)
+
+            self.attempt, self.commit = attempt, commit
+
+        @ti.kernel
+        def count_alive() -> ti.i32:
+            n = 0
+            for i in range(cap):
+                n += alive[i]
+            return n
+
+        self.count_alive = count_alive
