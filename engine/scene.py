@@ -72,13 +72,14 @@ class Scene:
         self._h_last = sol.h
         self.layout = PoolLayout.for_emitters(cfg.emitters, self.frame_dt)
         self.state = ParticleState(self.layout.capacity, self.adaptive)
-        self.emitters = Emitters(cfg.emitters, self.layout, self.state, cfg.seed, cfg.forces.gravity)
+        self.emitters = Emitters(cfg.emitters, self.layout, self.state, cfg.seed)
         self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag)
         self.colliders = Colliders(collider_specs(cfg.colliders))
         self._moving_colliders = any(s.path for s in self.colliders.specs)
         collide = self.colliders.make_func() if self.colliders.count else None
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
                                              self.method, self.adaptive)
+        self.emitters.build(self.integrator.advance_one)
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:

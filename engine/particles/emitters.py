@@ -60,7 +60,7 @@ class EmitterClock:
 class Emitters:
     """Per-emitter parameters as fields (shape (E,)), their clocks, and the spawn kernel."""
 
-    def __init__(self, configs, layout, state, seed: int, gravity):
+    def __init__(self, configs, layout, state, seed: int):
         self.configs = list(configs)
         self.layout, self.state, self.seed = layout, state, int(seed)
         E = len(self.configs)
@@ -94,13 +94,17 @@ class Emitters:
         self.dropped = ti.field(ti.i32, shape=max(1, E))
         self.positions = [np.asarray(sample_path(c.path, 0.0, c.position), np.float64)
                           for c in self.configs]
-        self._build_kernel(gravity)
+        self._spawn = None
 
     def position_at(self, e: int, t: float) -> np.ndarray:
         c = self.configs[e]
         return np.asarray(sample_path(c.path, t, c.position), np.float64) if c.path else self.positions[e]
 
-    def _build_kernel(self, gravity):
+    def build(self, birth):
+        """Compile the spawn kernel. ``birth(i, t, h)`` is the integrator's single-particle step:
+        a particle born at t_s inside a step [t0, t1) is advanced to t1 by one step of the scene's
+        own method with h = t1 − t_s, so it feels the forces (and colliders) from its birth on —
+        a ballistic start would leave an O(h) velocity error that never decays."""
         S = self.state
         pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
                                       S.particle_life, S.particle_alive)
@@ -167,20 +171,21 @@ class Emitters:
                         dd = cz * d + sz * (ti.cos(phi2) * du + ti.sin(phi2) * dw)
                     speed = smin[e] + (smax[e] - smin[e]) * r[6]
                     v = speed * dd + inherit[e] * ev
-                    ag = t_end - ts  # emitted partway through the step: already this old
-                    pos[slot] = centre + off + v * ag
+                    pos[slot] = centre + off
                     vel[slot] = v
-                    age[slot] = ag
+                    age[slot] = 0.0
                     life[slot] = elife[e] * (1.0 - elrand[e] * r[7])
                     alive[slot] = 1
                     pem[slot] = e
                     prand[slot] = rand01(seed, e, sid, 9)
+                    if t_end - ts > 0:
+                        birth(slot, ts, t_end - ts)
 
         self._spawn = spawn
 
     def emit(self, t0: float, h: float) -> int:
-        """Spawn everything due in [t0, t0 + h); particles carry the age they reached by t0 + h.
-        Returns the number requested."""
+        """Spawn everything due in [t0, t0 + h), each advanced from its birth time to t0 + h.
+        Call after the step [t0, t0 + h) was taken (accepted). Returns the number spawned."""
         total = 0
         t1 = t0 + h
         for e, clock in enumerate(self.clocks):

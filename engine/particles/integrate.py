@@ -60,14 +60,20 @@ class ParticleIntegrator:
 
         step = make_step(method, deriv, 6, ti.f32)
 
+        @ti.func
+        def advance_one(i, t, h):
+            """One step of the method for slot i, then collide and age it."""
+            y = step(_pack(pos[i], vel[i]), t, h, i)
+            finish(i, ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[3], y[4], y[5]]), t + h, h)
+
         @ti.kernel
         def step_fixed(t: ti.f32, h: ti.f32):
             for i in range(cap):
                 if alive[i] != 0:
-                    y = step(_pack(pos[i], vel[i]), t, h, i)
-                    finish(i, ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[3], y[4], y[5]]), t + h, h)
+                    advance_one(i, t, h)
 
         self.step_fixed = step_fixed
+        self.advance_one = advance_one
 
         if adaptive:
             cpos, cvel = S.cand_pos, S.cand_vel

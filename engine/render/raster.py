@@ -105,7 +105,7 @@ class Renderer:
                     line = ti.max(ti.max(0.0, 1.0 - du / (1.2 * foot)), ti.max(0.0, 1.0 - dv / (1.2 * foot)))
                     line *= ti.min(1.0, 0.25 / foot)  # fade lines that become finer than a pixel
                     fade = ti.exp(-s / 40.0)
-                    col = (ti.Vector([0.030, 0.032, 0.036]) + line * ti.Vector([0.07, 0.075, 0.08])) * fade \
+                    col = (ti.Vector([0.018, 0.019, 0.022]) + line * ti.Vector([0.030, 0.032, 0.036])) * fade \
                         + col * (1.0 - fade)
                     z = zz
             return col, z
@@ -135,8 +135,8 @@ class Renderer:
                             ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
                             lam = ti.max(0.0, n.dot(ldir))
                             rim = ti.pow(1.0 - ti.abs(n.dot(d)), 3.0)
-                            col = ti.Vector([0.035, 0.038, 0.045]) + 0.10 * lam * ti.Vector([0.8, 0.85, 1.0]) \
-                                + 0.05 * rim
+                            col = ti.Vector([0.02, 0.021, 0.025]) + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) \
+                                + 0.03 * rim
                             z = zz
                 bg[py, px] = col
                 depth[py, px] = z
