@@ -35,7 +35,6 @@ class Stats:
     frames: int = 0
     peak_alive: int = 0
     alive: int = 0
-    emitted: int = 0
     h_min: float = math.inf
     h_max: float = 0.0
     history: list = field(default_factory=list, repr=False)
@@ -71,14 +70,16 @@ class Scene:
         self.stats = Stats()
         self._h_last = sol.h
         self.layout = PoolLayout.for_emitters(cfg.emitters, self.frame_dt)
-        self.state = ParticleState(self.layout.capacity, self.adaptive)
-        self.emitters = Emitters(cfg.emitters, self.layout, self.state, cfg.seed)
+        self.emitters = Emitters(cfg.emitters, self.layout, None, cfg.seed)
+        self.state = ParticleState(self.layout.capacity, self.adaptive, self.emitters.uses_events)
+        self.emitters.state = self.state
         self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag)
         self.colliders = Colliders(collider_specs(cfg.colliders))
         self._moving_colliders = any(s.path for s in self.colliders.specs)
         collide = self.colliders.make_func() if self.colliders.count else None
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
-                                             self.method, self.adaptive)
+                                             self.method, self.adaptive,
+                                             events=self.emitters.uses_events)
         self.emitters.build(self.integrator.advance_one)
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
@@ -124,7 +125,8 @@ class Scene:
                 continue
             self.integrator.commit(self.t, h)
             self._h_last = h
-            self.stats.emitted += self.emitters.emit(self.t, h)
+            self.emitters.emit_children()
+            self.emitters.emit(self.t, h)
             self.t = t_target if lands else self.t + h
             self.stats.steps += 1
             self.stats.h_min = min(self.stats.h_min, h)
@@ -141,7 +143,8 @@ class Scene:
             h = dt / n  # equal substeps that land exactly on the target
             for j in range(n):
                 self._substep_fixed(h)
-                self.stats.emitted += self.emitters.emit(self.t, h)
+                self.emitters.emit_children()
+                self.emitters.emit(self.t, h)
                 self.t = t_target if j == n - 1 else self.t + h
             self.stats.h_min = min(self.stats.h_min, h)
             self.stats.h_max = max(self.stats.h_max, h)

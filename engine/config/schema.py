@@ -60,6 +60,16 @@ class Burst(Strict):
     interval: Positive = 1.0
 
 
+class SubEmitter(Strict):
+    """Spawn ``count`` particles of emitter ``emitter`` where a particle of this one dies or hits a
+    collider (with a velocity change of at least ``min_speed`` m/s)."""
+
+    event: Literal["death", "collision"] = "death"
+    emitter: str
+    count: Annotated[int, Field(ge=1, le=64)] = 1
+    min_speed: NonNeg = 1.0
+
+
 class Emitter(Strict):
     name: str = ""
     effect: Optional[str] = None  # a preset from effects/ that this emitter starts from
@@ -80,6 +90,10 @@ class Emitter(Strict):
     lifetime: Annotated[float, Field(gt=0, le=1e4)] = 1.0
     lifetime_randomness: Fraction01 = 0.0  # lifetime × (1 − randomness·u), u ∈ [0, 1)
     drag: Optional[NonNeg] = None  # overrides forces.drag for this emitter's particles
+    buoyancy: Annotated[float, Field(ge=-1e3, le=1e3)] = 0.0  # upward m/s² while hot
+    cooling: Positive = 1.0  # buoyancy decays as exp(−age / cooling), seconds
+    turbulence: NonNeg = 1.0  # scales forces.turbulence for this emitter's particles
+    sub_emitters: Annotated[List[SubEmitter], Field(max_length=4)] = []
     capacity: Optional[Annotated[int, Field(ge=1, le=50_000_000)]] = None
     # look
     blend: Literal["additive", "alpha"] = "additive"
@@ -99,8 +113,6 @@ class Emitter(Strict):
             raise ValueError(f"direction: must not be zero, got {self.direction}")
         if self.stop is not None and self.stop < self.start:
             raise ValueError(f"stop: {self.stop} is before start {self.start}")
-        if self.rate == 0 and not self.bursts:
-            raise ValueError("rate: an emitter needs a rate > 0 or at least one burst")
         _check_path(self.path)
         return self
 
@@ -147,6 +159,40 @@ class SphereCollider(_ColliderBase):
 Collider = Annotated[Union[PlaneCollider, SphereCollider], Field(discriminator="type")]
 
 
+class Turbulence(Strict):
+    """Curl-noise turbulence (Bridson et al. 2007): a divergence-free acceleration field, so smoke
+    swirls instead of compressing. ``frequency`` in 1/m, ``scroll`` in m/s (the pattern rises)."""
+
+    strength: NonNeg = 0.0  # m/s²
+    frequency: Positive = 1.0
+    scroll: Finite = 0.5
+    octaves: Annotated[int, Field(ge=1, le=4)] = 2
+
+
+class Attractor(Strict):
+    """Pulls particles toward ``position`` (negative strength pushes): a = s · d̂ / (1 + (|d|/r)²)."""
+
+    position: Vec3
+    strength: Finite = 1.0
+    radius: Positive = 1.0
+
+
+class Vortex(Strict):
+    """Swirls particles around the axis through ``position``: tangential a = s · g(ρ/r), with
+    g peaking at ρ = r."""
+
+    position: Vec3 = [0.0, 0.0, 0.0]
+    axis: Vec3 = [0.0, 1.0, 0.0]
+    strength: Finite = 1.0
+    radius: Positive = 1.0
+
+    @model_validator(mode="after")
+    def _check(self):
+        if math.fsum(c * c for c in self.axis) < 1e-12:
+            raise ValueError(f"axis: must not be zero, got {self.axis}")
+        return self
+
+
 class Camera(Strict):
     position: Vec3 = [0.0, 2.0, 8.0]
     look_at: Vec3 = [0.0, 1.0, 0.0]
@@ -166,6 +212,9 @@ class Forces(Strict):
     gravity: Vec3 = [0.0, -9.81, 0.0]
     drag: NonNeg = 0.0  # linear drag k: a = −k (v − wind), 1/s
     wind: Vec3 = [0.0, 0.0, 0.0]  # air velocity seen by drag, m/s
+    turbulence: Turbulence = Turbulence()
+    attractors: Annotated[List[Attractor], Field(max_length=16)] = []
+    vortices: Annotated[List[Vortex], Field(max_length=16)] = []
 
 
 class Render(Strict):
@@ -176,6 +225,7 @@ class Render(Strict):
                           Field(min_length=3, max_length=3)] = [0.02, 0.025, 0.035]
     grid: bool = True
     show_colliders: bool = True
+    density_shading: Annotated[float, Field(ge=0, le=20)] = 0.6  # thick smoke/dust darkens
 
 
 class Scene(Strict):
@@ -195,6 +245,23 @@ class Scene(Strict):
     def _check(self):
         if self.duration is not None and self.frames is not None:
             raise ValueError("frames: give either duration or frames, not both")
+        names = [e.name for e in self.emitters]
+        targets = set()
+        for i, em in enumerate(self.emitters):
+            for j, sub in enumerate(em.sub_emitters):
+                if sub.emitter not in names:
+                    raise ValueError(f"emitters[{i}].sub_emitters[{j}].emitter: {sub.emitter!r} names no "
+                                     f"emitter (names: {', '.join(repr(n) for n in names if n) or 'none'})")
+                if sub.emitter == em.name:
+                    raise ValueError(f"emitters[{i}].sub_emitters[{j}].emitter: an emitter cannot feed itself")
+                targets.add(sub.emitter)
+        for i, em in enumerate(self.emitters):
+            if em.rate == 0 and not em.bursts and em.name not in targets:
+                raise ValueError(f"emitters[{i}].rate: an emitter needs a rate > 0, a burst, or to be "
+                                 f"another emitter's sub-emitter")
+        dup = {n for n in names if n and names.count(n) > 1}
+        if dup:
+            raise ValueError(f"emitters: names must be unique, repeated: {', '.join(sorted(dup))}")
         return self
 
     @property

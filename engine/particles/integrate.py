@@ -20,7 +20,8 @@ def _pack(x, v):
 
 
 class ParticleIntegrator:
-    def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False):
+    def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False,
+                 events: bool = False):
         S = state
         pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
                                       S.particle_life, S.particle_alive)
@@ -31,6 +32,9 @@ class ParticleIntegrator:
         self.nonfinite_t[None] = NO_FAILURE
         bad_t, err, hits = self.nonfinite_t, self.err, self.hits
         has_colliders = collide is not None
+        event = impact = None
+        if events:
+            event, impact = S.particle_event, S.particle_impact
 
         @ti.func
         def deriv(y, t, i):
@@ -45,6 +49,10 @@ class ParticleIntegrator:
                 killed = 0
                 if ti.static(has_colliders):
                     nx, nv, k, nh = collide(x, v)
+                    if ti.static(events):
+                        if nh > 0:
+                            event[i] |= 2
+                            impact[i] = (nv - v).norm()
                     x, v, killed = nx, nv, k
                     if nh > 0:
                         ti.atomic_add(hits[None], nh)
@@ -54,6 +62,8 @@ class ParticleIntegrator:
                 age[i] = a
                 if a >= life[i] or killed != 0:
                     alive[i] = 0
+                    if ti.static(events):
+                        event[i] |= 1
             else:
                 ti.atomic_min(bad_t[None], t_end)
                 alive[i] = 0

@@ -48,6 +48,17 @@ class PoolLayout:
     @classmethod
     def for_emitters(cls, emitters, frame_dt: float) -> "PoolLayout":
         sizes = [emitter_capacity(em, frame_dt) for em in emitters]
+        names = {em.name: k for k, em in enumerate(emitters) if em.name}
+        for em in emitters:  # children: parents' events per second × count × child lifetime
+            births = em.rate
+            burst_total = sum(b.count * b.cycles for b in em.bursts)
+            for sub in em.sub_emitters:
+                c = names[sub.emitter]
+                if emitters[c].capacity is not None:
+                    continue
+                per_event = sub.count * (2 if sub.event == "collision" else 1)
+                life = emitters[c].lifetime + frame_dt
+                sizes[c] += int(math.ceil((births * life + burst_total) * per_event))
         starts, acc = [], 0
         for s in sizes:
             starts.append(acc)
@@ -61,10 +72,11 @@ class ParticleState:
     ``particle_pos`` (vec3 f32, m), ``particle_vel`` (vec3 f32, m/s), ``particle_age`` and
     ``particle_life`` (f32, s), ``particle_alive`` (i32 0/1), ``particle_emitter`` (i32),
     ``particle_rand`` (f32 in [0, 1): per-particle variation for size and colour).
-    With adaptive stepping, ``cand_pos``/``cand_vel`` hold the attempted step (allocated only then).
+    With adaptive stepping, ``cand_pos``/``cand_vel`` hold the attempted step; with sub-emitters,
+    ``particle_event`` and ``particle_impact`` record deaths and collisions (each allocated only then).
     """
 
-    def __init__(self, capacity: int, adaptive: bool):
+    def __init__(self, capacity: int, adaptive: bool, events: bool = False):
         n = max(1, capacity)
         self.capacity = capacity
         self.particle_pos = ti.Vector.field(3, ti.f32, shape=n)
@@ -74,6 +86,9 @@ class ParticleState:
         self.particle_alive = ti.field(ti.i32, shape=n)
         self.particle_emitter = ti.field(ti.i32, shape=n)
         self.particle_rand = ti.field(ti.f32, shape=n)
+        if events:  # sub-emitters: what happened to each particle during the last step
+            self.particle_event = ti.field(ti.i32, shape=n)  # bit 1 died, bit 2 hit a collider
+            self.particle_impact = ti.field(ti.f32, shape=n)  # |Δv| of its last collision, m/s
         if adaptive:
             self.cand_pos = ti.Vector.field(3, ti.f32, shape=n)
             self.cand_vel = ti.Vector.field(3, ti.f32, shape=n)
