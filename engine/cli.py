@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_SIM_FAILED = 0, 2, 3
@@ -85,6 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
     ls = sub.add_parser("list", help="list the configs and effect presets")
     ls.add_argument("--dir", default="configs")
     ls.set_defaults(func=lambda a: _commands().cmd_list(a), no_taichi=True)
+    g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
+    g.add_argument("--out", default=os.path.join("renders", "gallery"))
+    g.add_argument("--configs", default="configs")
+    g.set_defaults(func=lambda a: __import__("engine.gallery", fromlist=["x"]).cmd_gallery(a))
     return ap
 
 

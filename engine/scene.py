@@ -80,7 +80,7 @@ class Scene:
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
                                              self.method, self.adaptive,
                                              events=self.emitters.uses_events)
-        self.emitters.build(self.integrator.advance_one)
+        self.emitters.build()
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
@@ -110,6 +110,7 @@ class Scene:
                     f"ending t={t_target:.4g} s (h={self._h_try:.3g} s); raise solver.tolerance or "
                     f"solver.max_steps_per_frame")
             h, lands = clip_to_target(self.t, self._h_try, t_target)
+            self.emitters.emit(self.t, h)  # newborns wait (negative age) if the step shrinks
             if self._moving_colliders:
                 self.colliders.move_to(self.t + h)
             err = self.integrator.attempt(self.t, h, self._atol, sol.tolerance)
@@ -126,7 +127,6 @@ class Scene:
             self.integrator.commit(self.t, h)
             self._h_last = h
             self.emitters.emit_children()
-            self.emitters.emit(self.t, h)
             self.t = t_target if lands else self.t + h
             self.stats.steps += 1
             self.stats.h_min = min(self.stats.h_min, h)
@@ -142,9 +142,9 @@ class Scene:
             n = max(1, math.ceil(dt / self.cfg.solver.h - 1e-9))
             h = dt / n  # equal substeps that land exactly on the target
             for j in range(n):
+                self.emitters.emit(self.t, h)
                 self._substep_fixed(h)
                 self.emitters.emit_children()
-                self.emitters.emit(self.t, h)
                 self.t = t_target if j == n - 1 else self.t + h
             self.stats.h_min = min(self.stats.h_min, h)
             self.stats.h_max = max(self.stats.h_max, h)

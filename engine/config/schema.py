@@ -90,6 +90,7 @@ class Emitter(Strict):
     lifetime: Annotated[float, Field(gt=0, le=1e4)] = 1.0
     lifetime_randomness: Fraction01 = 0.0  # lifetime × (1 − randomness·u), u ∈ [0, 1)
     drag: Optional[NonNeg] = None  # overrides forces.drag for this emitter's particles
+    gravity_scale: Annotated[float, Field(ge=-100, le=100)] = 1.0  # 0: neutrally buoyant (smoke)
     buoyancy: Annotated[float, Field(ge=-1e3, le=1e3)] = 0.0  # upward m/s² while hot
     cooling: Positive = 1.0  # buoyancy decays as exp(−age / cooling), seconds
     turbulence: NonNeg = 1.0  # scales forces.turbulence for this emitter's particles

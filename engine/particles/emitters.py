@@ -36,11 +36,13 @@ class EmitterClock:
     carry: float = 0.0
     next_burst: int = 0
     enabled: bool = True
+    until: float = 0.0  # emission is scheduled up to here (an adaptive step may be retried shorter)
 
     def schedule(self, t0: float, t1: float, pending=()):
-        """Spawns for [t0, t1): a list of (count, spawn-time start, spawn-time span)."""
+        """Spawns for [t0, t1) not scheduled yet: a list of (count, birth-time start, span)."""
         out = []
-        a, b = max(t0, self.start), min(t1, self.stop)
+        a, b = max(t0, self.until, self.start), min(t1, self.stop)
+        self.until = max(self.until, t1)
         if self.enabled and self.rate > 0 and b > a:
             exact = self.rate * (b - a) + self.carry
             k = int(math.floor(exact))
@@ -111,11 +113,10 @@ class Emitters:
         c = self.configs[e]
         return np.asarray(sample_path(c.path, t, c.position), np.float64) if c.path else self.positions[e]
 
-    def build(self, birth):
-        """Compile the spawn kernels. ``birth(i, t, h)`` is the integrator's single-particle step:
-        a particle born at t_s inside a step [t0, t1) is advanced to t1 by one step of the scene's
-        own method with h = t1 − t_s, so it feels the forces (and colliders) from its birth on —
-        a ballistic start would leave an O(h) velocity error that never decays."""
+    def build(self):
+        """Compile the spawn kernels. A particle born at t_s inside the step [t0, t1) about to be
+        taken is written at the emitter's position at t_s with age −(t_s − t0): the step kernel
+        then advances it from t_s (see :mod:`engine.particles.integrate`)."""
         S = self.state
         pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
                                       S.particle_life, S.particle_alive)
@@ -181,8 +182,8 @@ class Emitters:
             return r[0]
 
         @ti.kernel
-        def spawn(e: ti.i32, k: ti.i32, seg_start: ti.i32, seg_size: ti.i32, t_end: ti.f32,
-                  ts0: ti.f32, tspan: ti.f32, pa: vec3, pb: vec3, t0: ti.f32, h: ti.f32, ev: vec3):
+        def spawn(e: ti.i32, k: ti.i32, seg_start: ti.i32, seg_size: ti.i32, ts0: ti.f32,
+                  tspan: ti.f32, pa: vec3, pb: vec3, t0: ti.f32, h: ti.f32, ev: vec3):
             h0 = head[e]
             s0 = serial[e]
             for j in range(k):
@@ -199,8 +200,7 @@ class Emitters:
                     if h > 0:
                         a = ti.min(1.0, ti.max(0.0, (ts - t0) / h))
                     init_particle(slot, e, sid, pa + a * (pb - pa), ev)
-                    if t_end - ts > 0:
-                        birth(slot, ts, t_end - ts)
+                    age[slot] = -ti.max(0.0, ts - t0)  # born this long into the step
             head[e] = (h0 + k) % seg_size
             serial[e] = s0 + k
 
@@ -246,8 +246,7 @@ class Emitters:
             self._clear_events()
 
     def emit(self, t0: float, h: float) -> None:
-        """Spawn everything due in [t0, t0 + h), each advanced from its birth time to t0 + h.
-        Call after the step [t0, t0 + h) was taken (accepted)."""
+        """Write everything due in [t0, t0 + h) before the step [t0, t0 + h) is taken."""
         t1 = t0 + h
         for e, clock in enumerate(self.clocks):
             plan = clock.schedule(t0, t1, self.pending[e])
@@ -262,7 +261,7 @@ class Emitters:
                     self.dropped[e] += k - size
                     self.emitter_serial[e] += k - size
                     k = size
-                self._spawn(e, k, start, size, t1, ts0, tspan, pa.tolist(), pb.tolist(), t0, h,
+                self._spawn(e, k, start, size, ts0, tspan, pa.tolist(), pb.tolist(), t0, h,
                             ev.tolist())
 
     def burst(self, e: int, count: int) -> None:

@@ -14,8 +14,9 @@ from .noise import curl_noise
 
 
 class Forces:
-    """Fields: ``force_gravity`` (vec3, m/s²), ``force_wind`` (vec3, m/s), ``force_drag`` (1/s,
-    the scene's linear drag; an emitter's own ``drag`` overrides it for its particles)."""
+    """Fields: ``force_gravity`` (vec3, m/s²; scaled per emitter by ``gravity_scale``),
+    ``force_wind`` (vec3, m/s), ``force_drag`` (1/s, the scene's linear drag; an emitter's own
+    ``drag`` overrides it for its particles)."""
 
     def __init__(self, cfg, emitter_configs, state, emitter_drag):
         E = len(emitter_configs)
@@ -25,7 +26,10 @@ class Forces:
         self.force_gravity[None] = cfg.gravity
         self.force_wind[None] = cfg.wind
         self.force_drag[None] = cfg.drag
-        self.use_gravity = any(g != 0.0 for g in cfg.gravity)
+        self.use_gravity = any(g != 0.0 for g in cfg.gravity) and any(
+            e.gravity_scale != 0 for e in emitter_configs)
+        self.emitter_gravity_scale = ti.field(ti.f32, shape=E)
+        self.emitter_gravity_scale.from_numpy(np.array([e.gravity_scale for e in emitter_configs], np.float32))
         self.use_drag = cfg.drag > 0 or any((e.drag or 0.0) > 0 for e in emitter_configs)
         self.use_buoyancy = any(e.buoyancy != 0 for e in emitter_configs)
         tb = cfg.turbulence
@@ -74,9 +78,11 @@ class Forces:
         g, wind, kdrag = self.force_gravity, self.force_wind, self.force_drag
         pem, edrag = self._state.particle_emitter, self._emitter_drag
 
+        gscale = self.emitter_gravity_scale
+
         @ti.func
         def gravity(x, v, t, i):
-            return g[None]
+            return g[None] * gscale[pem[i]]
 
         @ti.func
         def drag(x, v, t, i):

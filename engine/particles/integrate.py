@@ -43,6 +43,10 @@ class ParticleIntegrator:
             return _pack(v, accel(x, v, t, i))
 
         @ti.func
+        def deriv_q(y, t, i):  # x' = v: all the drift of a partitioned method needs
+            return _pack(ti.Vector([y[3], y[4], y[5]]), ti.Vector([0.0, 0.0, 0.0]))
+
+        @ti.func
         def finish(i, x, v, t_end, h):
             """Collide, age and retire one particle after an accepted step."""
             if is_finite(x.sum() + v.sum()):
@@ -68,44 +72,51 @@ class ParticleIntegrator:
                 ti.atomic_min(bad_t[None], t_end)
                 alive[i] = 0
 
-        step = make_step(method, deriv, 6, ti.f32)
-
-        @ti.func
-        def advance_one(i, t, h):
-            """One step of the method for slot i, then collide and age it."""
-            y = step(_pack(pos[i], vel[i]), t, h, i)
-            finish(i, ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[3], y[4], y[5]]), t + h, h)
+        step = make_step(method, deriv, 6, ti.f32, fq=deriv_q)
 
         @ti.kernel
         def step_fixed(t: ti.f32, h: ti.f32):
             for i in range(cap):
                 if alive[i] != 0:
-                    advance_one(i, t, h)
+                    a0 = ti.min(age[i], 0.0)  # < 0: born a0 seconds into this step
+                    if -a0 < h:
+                        y = step(_pack(pos[i], vel[i]), t - a0, h + a0, i)
+                        finish(i, ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[3], y[4], y[5]]),
+                               t + h, h)
+                    else:
+                        age[i] += h  # not born yet
 
         self.step_fixed = step_fixed
-        self.advance_one = advance_one
 
         if adaptive:
             cpos, cvel = S.cand_pos, S.cand_vel
-            dstep = doubling_step(method, deriv, 6, ti.f32, extrapolate)
+            dstep = doubling_step(method, deriv, 6, ti.f32, extrapolate, fq=deriv_q)
 
             @ti.kernel
             def attempt(t: ti.f32, h: ti.f32, atol: ti.f32, rtol: ti.f32) -> ti.f32:
                 err[None] = 0.0
                 for i in range(cap):
                     if alive[i] != 0:
-                        y0 = _pack(pos[i], vel[i])
-                        y2, est = dstep(y0, t, h, i)
-                        cpos[i] = ti.Vector([y2[0], y2[1], y2[2]])
-                        cvel[i] = ti.Vector([y2[3], y2[4], y2[5]])
-                        ti.atomic_max(err[None], scaled_error(y0, y2, est, atol, rtol))
+                        a0 = ti.min(age[i], 0.0)
+                        if -a0 < h:
+                            y0 = _pack(pos[i], vel[i])
+                            y2, est = dstep(y0, t - a0, h + a0, i)
+                            cpos[i] = ti.Vector([y2[0], y2[1], y2[2]])
+                            cvel[i] = ti.Vector([y2[3], y2[4], y2[5]])
+                            ti.atomic_max(err[None], scaled_error(y0, y2, est, atol, rtol))
+                        else:
+                            cpos[i] = pos[i]
+                            cvel[i] = vel[i]
                 return err[None]
 
             @ti.kernel
             def commit(t: ti.f32, h: ti.f32):
                 for i in range(cap):
                     if alive[i] != 0:
-                        finish(i, cpos[i], cvel[i], t + h, h)
+                        if age[i] + h > 0:
+                            finish(i, cpos[i], cvel[i], t + h, h)
+                        else:
+                            age[i] += h  # not born yet
 
             self.attempt, self.commit = attempt, commit
 

@@ -148,8 +148,10 @@ class Renderer:
                 oit_logT[py, px] = 0.0
 
         @ti.func
-        def deposit(cx, cy, rad, z, col, a, is_add, energy):
-            """A soft disc of radius rad px at (cx, cy): kernel (1 − d²/r²)², depth-tested."""
+        def deposit(cx, cy, rad, z, col, a, is_add, energy, soft):
+            """A soft disc of radius rad px at (cx, cy): kernel (1 − d²/r²)². Depth-tested as a
+            soft particle (Lorach 2007): it fades over ``soft`` metres in front of an opaque
+            surface instead of being cut by it, so a flame on the ground has no hard edge."""
             x0 = ti.max(0, ti.cast(ti.floor(cx - rad), ti.i32))
             x1 = ti.min(W - 1, ti.cast(ti.floor(cx + rad), ti.i32))
             y0 = ti.max(0, ti.cast(ti.floor(cy - rad), ti.i32))
@@ -160,8 +162,9 @@ class Renderer:
                     dx = xx + 0.5 - cx
                     dy = yy + 0.5 - cy
                     q = 1.0 - (dx * dx + dy * dy) * inv_r2
-                    if q > 0 and z < depth[yy, xx]:
-                        w = q * q * energy
+                    gap = depth[yy, xx] - z
+                    if q > 0 and gap > 0:
+                        w = q * q * energy * ti.min(1.0, gap / soft)
                         if ti.static(uses_add):
                             if is_add:
                                 light[yy, xx] += col * (a * w)
@@ -180,7 +183,7 @@ class Renderer:
             half_h = 0.5 * H
             ti.loop_config(serialize=True)
             for i in range(cap):
-                if alive[i] != 0:
+                if alive[i] != 0 and age[i] >= 0.0:  # (negative age: not born yet)
                     e = pem[i]
                     tl = ti.min(1.0, age[i] / life[i])
                     dpos = pos[i] - o
@@ -200,6 +203,7 @@ class Renderer:
                         if rad > MAX_SPLAT_RADIUS:
                             rad = MAX_SPLAT_RADIUS
                         is_add = additive[e] != 0
+                        soft = ti.max(0.5 * sz, 1e-3)
                         st = streak[e]
                         if st > 0:
                             tail = pos[i] - vel[i] * st - o
@@ -212,9 +216,9 @@ class Renderer:
                             for s in range(n):
                                 a_s = (s + 0.5) / n
                                 deposit(cx + a_s * (tx - cx), cy + a_s * (ty - cy), rad, z, col,
-                                        a * (1.0 - 0.6 * a_s), is_add, energy * 2.0 / n)
+                                        a * (1.0 - 0.6 * a_s), is_add, energy * 2.0 / n, soft)
                         else:
-                            deposit(cx, cy, rad, z, col, a, is_add, energy)
+                            deposit(cx, cy, rad, z, col, a, is_add, energy, soft)
 
         @ti.func
         def aces(x):
