@@ -3,7 +3,7 @@
 Layout follows a Model (fixed topology and parameters) / State (positions, velocities) split:
 :mod:`.topology` (numpy builders), :mod:`.model` (fields, CSR adjacency, edge colouring),
 :mod:`.forces` (gather and atomic accumulation), :mod:`.integrators` (explicit, stage by stage),
-:mod:`.xpbd`, :mod:`.constraints` (pins, stretch limits, collisions), :mod:`.stability` (the
+:mod:`.xpbd`, :mod:`.constraints` (pins, collisions), :mod:`.limits` (stretch caps), :mod:`.stability` (the
 stiffness guard), :mod:`.adaptive` (step doubling buffers), :mod:`.energy`, :mod:`.system`.
 """
 from .energy import write_energy_csv

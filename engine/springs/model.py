@@ -13,7 +13,7 @@ per-node parameters the model holds two precomputed orderings, both built once i
 import numpy as np
 import taichi as ti
 
-from .topology import STRUCTURAL, Topology
+from .topology import Topology
 
 
 def csr_adjacency(n_nodes: int, edges: np.ndarray):
@@ -46,8 +46,9 @@ class SpringModel:
 
     node_mass, node_inv_mass (0 for pinned nodes), node_pinned (i32), pin_start / pin_target
     (where a pinned node is at the start / end of the current frame); spring_a, spring_b,
-    spring_rest_length, spring_ks, spring_kd, spring_limit (1: subject to the stretch limit);
-    adj_offset, adj_spring, adj_sign; color_spring; gravity (0-d vector, m/s²).
+    spring_rest_length, spring_ks, spring_kd;
+    adj_offset, adj_spring, adj_sign; color_spring (springs grouped by colour, ranges in
+    color_ranges); gravity (0-d vector, m/s²).
     """
 
     def __init__(self, top: Topology, dtype=ti.f32, gravity=(0.0, -9.81, 0.0)):
@@ -65,7 +66,6 @@ class SpringModel:
         self.spring_rest_length = ti.field(dtype, M)
         self.spring_ks = ti.field(dtype, M)
         self.spring_kd = ti.field(dtype, M)
-        self.spring_limit = ti.field(ti.i32, M)
         self.adj_offset = ti.field(ti.i32, N + 1)
         self.adj_spring = ti.field(ti.i32, 2 * M)
         self.adj_sign = ti.field(dtype, 2 * M)
@@ -89,12 +89,11 @@ class SpringModel:
         self.spring_rest_length.from_numpy(pad(top.rest_length, M, npd))
         self.spring_ks.from_numpy(pad(top.ks, M, npd))
         self.spring_kd.from_numpy(pad(top.kd, M, npd))
-        self.spring_limit.from_numpy(pad((top.kind == STRUCTURAL).astype(np.int32), M, np.int32))
         off, spr, sign = csr_adjacency(n, top.edges)
         self.adj_offset.from_numpy(pad(off, N + 1, np.int32))
         self.adj_spring.from_numpy(pad(spr, 2 * M, np.int32))
         self.adj_sign.from_numpy(pad(sign, 2 * M, npd))
-        colors, nc = edge_coloring(n, top.edges)
+        self.spring_colors, nc = colors, nc = edge_coloring(n, top.edges)
         order = np.argsort(colors, kind="stable")
         self.color_spring.from_numpy(pad(order, M, np.int32))
         bounds = np.searchsorted(colors[order], np.arange(nc + 1))

@@ -25,6 +25,7 @@ from .constraints import NO_FAILURE, make_constraint_kernels
 from .energy import network_energy
 from .forces import ACCUMULATORS, make_accel_kernels
 from .integrators import ExplicitStepper
+from .limits import DistanceLimits
 from .model import SpringModel, SpringState
 from .stability import SAFETY, StiffnessError, auto_substeps, check_step, network_bounds, stable_step
 from .topology import STRUCTURAL, Topology, surface_lines
@@ -42,7 +43,7 @@ class SpringSystem:
     def __init__(self, topology: Topology, colliders=None, gravity=(0.0, -9.81, 0.0),
                  integrator: str = "symplectic_euler", h=None, substeps=None, adaptive: bool = False,
                  tol: float = 1e-4, rtol=None, atol=None, accumulate: str = "gather",
-                 xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 4,
+                 xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 2,
                  check_stability: bool = True, dtype=ti.f32, record_energy: bool = False,
                  move_colliders=None):
         ensure_init()
@@ -74,6 +75,7 @@ class SpringSystem:
             move_colliders = colliders is not None and any(s.path for s in colliders.specs)
         self.move_colliders = move_colliders
         self._c = make_constraint_kernels(self.model, self.state, colliders)
+        self._limits = DistanceLimits(self.model, self.state) if max_stretch is not None else None
         self._buf = DoublingBuffers(self.model, self.state) if adaptive else None
         self._ctrl = StepDoublingController(order=self.stepper.order, max_factor=5.0)
         self._h_next = None
@@ -125,10 +127,8 @@ class SpringSystem:
         self.stepper.step(h)
 
     def _post(self, alpha: float, k: int, t_end: float) -> None:
-        if self.max_stretch is not None:
-            for _ in range(self.limit_iterations):
-                for lo, hi in self.model.color_ranges:
-                    self._c["limit_color"](lo, hi, self.max_stretch)
+        if self._limits is not None:
+            self._limits.apply(self.max_stretch, self.limit_iterations)
         if self.move_colliders:
             self.colliders.move_to(t_end)
         self._c["finalize"](alpha, k)
@@ -200,11 +200,16 @@ class SpringSystem:
         self.model.pin_start[node] = self.state.node_pos[node]
         self.model.pin_target[node] = pos
         self.model.set_pinned(node, True)
-        self.bounds = network_bounds(self.top, self.model.pinned_mask)
+        self._pins_changed()
 
     def release(self, node: int) -> None:
         self.model.set_pinned(node, False)
+        self._pins_changed()
+
+    def _pins_changed(self) -> None:
         self.bounds = network_bounds(self.top, self.model.pinned_mask)
+        if self._limits is not None:
+            self._limits.refresh()
 
     def set_pin_target(self, node: int, pos) -> None:
         """Where a pinned node should be at the end of the next ``step``: it moves there linearly
