@@ -120,13 +120,13 @@ def _energy_series(integrator, h, n_steps, every=10):
 
 def test_symplectic_energy_bounded_while_euler_grows(tmp_path):
     h = 0.01  # hω = 0.1, well below symplectic Euler's limit of 2
-    se = _energy_series("symplectic_euler", h, 10_000)
-    eu = _energy_series("euler", h, 10_000)
+    se = _energy_series("symplectic_euler", h, 10_000, every=50)
+    eu = _energy_series("euler", h, 10_000, every=50)
     e0 = se[0]
     assert np.abs(se - e0).max() < 0.1 * e0
-    first, last = np.abs(se[:100] - e0).max(), np.abs(se[-100:] - e0).max()
+    first, last = np.abs(se[:20] - e0).max(), np.abs(se[-20:] - e0).max()
     assert last < 1.5 * first + 1e-12  # no secular drift
-    assert eu[-1] > 100 * e0 and np.all(np.diff(eu[::100]) > 0)  # grows ×(1 + h²ω²) per step
+    assert eu[-1] > 100 * e0 and np.all(np.diff(eu[::20]) > 0)  # grows ×(1 + h²ω²) per step
     path = tmp_path / "energy.csv"
     write_energy_csv(path, [dict(t=i * h, kinetic=0, gravitational=0, spring=v, total=v) for i, v in enumerate(se[:3])])
     lines = path.read_text().splitlines()
@@ -153,7 +153,7 @@ def test_guard_refuses_stiff_cloth_and_forced_run_diverges():
 
 def test_xpbd_stiff_cloth_stable_at_frame_rate():
     sys = SpringSystem(_stiff_cloth(), integrator="xpbd", xpbd_iterations=20, substeps=2)
-    for _ in range(90):
+    for _ in range(45):
         sys.step(1 / 60)
         assert np.isfinite(sys.positions()).all()
     stretch = _stretch(sys)
@@ -210,7 +210,7 @@ def test_adaptive_lands_on_frames_and_matches_fine_rk4():
     def small_chain():
         return chain(5, start=(0, 0, 0), end=(0.8, -0.2, 0), mass=0.05, ks=30.0, kd=0.05)
     ada = SpringSystem(small_chain(), integrator="rk4", adaptive=True, tol=1e-9, dtype=ti.f64)
-    ref = SpringSystem(small_chain(), integrator="rk4", substeps=100, dtype=ti.f64)
+    ref = SpringSystem(small_chain(), integrator="rk4", substeps=40, dtype=ti.f64)
     dt, multi = 1 / 60, 0
     for _ in range(30):
         ada.step(dt)
