@@ -110,7 +110,7 @@ def cmd_run(args) -> int:
         print(f"{cfg.name}: {st.frames} frames ({args.format}) in {out_dir}; {st.steps} steps"
               f" ({st.rejected} rejected), {cfg.solver.integrator}"
               f"{' adaptive' if cfg.solver.adaptive else ''}; peak live particles {st.peak_alive:,}"
-              f" of {scene.layout.capacity:,}; dropped {dropped:,}; {wall:.2f} s wall"
+              f" of {scene.capacity:,}; dropped {dropped:,}; {wall:.2f} s wall"
               f" ({sim_fps:.1f} frames/s after {t_built - t_start:.2f} s build)")
     if dropped:
         print(f"warning: {dropped:,} particles did not fit their emitters' pools "

@@ -1,31 +1,24 @@
-"""A particle scene: the builder that turns a validated config into fields and kernels once, and
-the stepping loop that advances it frame by frame.
+"""A scene: particles, soft bodies and colliders built once from a validated config, stepped frame
+by frame, rendered off-screen.
 
-Model (fixed: pool layout, emitter and collider parameters), State (particle fields, emitter
-clocks) and Control (this step's emitter and collider positions, gravity, wind) are kept apart;
-``Scene.build`` allocates every field and compiles every kernel before the first frame, and a
-feature the config does not use compiles nothing.
+Model (fixed: pool layout, emitter, body and collider parameters), State (particle and node
+fields, emitter clocks) and Control (this step's emitter and collider positions, gravity, wind)
+are kept apart. A part the config does not use is not built: a soft-body scene has no particle
+pool or splat kernel; a spark scene has no spring kernels.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import runtime
 from .colliders import ColliderSpec, Colliders
-from .ode.controller import StepDoublingController, clip_to_target
-from .ode.steppers import METHODS
-from .particles.emitters import Emitters
-from .particles.forces import Forces
-from .particles.integrate import NO_FAILURE, ParticleIntegrator
-from .particles.pool import ParticleState, PoolLayout
+from .particles.system import DivergenceError, ParticleSystem
 from .render.camera import Camera
 
-
-class DivergenceError(RuntimeError):
-    """The simulation produced a non-finite state; the message names integrator, h and time."""
+__all__ = ["Scene", "DivergenceError", "Stats", "collider_specs"]
 
 
 @dataclass
@@ -37,20 +30,17 @@ class Stats:
     alive: int = 0
     h_min: float = math.inf
     h_max: float = 0.0
-    history: list = field(default_factory=list, repr=False)
 
 
 def collider_specs(cfg_colliders):
     out = []
     for c in cfg_colliders:
+        common = dict(restitution=c.restitution, friction=c.friction, kill=c.kill, name=c.name,
+                      path=[(k.time, k.position) for k in c.path], visible=c.visible)
         if c.type == "plane":
-            out.append(ColliderSpec("plane", point=c.point, normal=c.normal, restitution=c.restitution,
-                                    friction=c.friction, kill=c.kill, name=c.name,
-                                    path=[(k.time, k.position) for k in c.path], visible=c.visible))
+            out.append(ColliderSpec("plane", point=c.point, normal=c.normal, **common))
         else:
-            out.append(ColliderSpec("sphere", point=c.center, radius=c.radius, restitution=c.restitution,
-                                    friction=c.friction, kill=c.kill, name=c.name,
-                                    path=[(k.time, k.position) for k in c.path], visible=c.visible))
+            out.append(ColliderSpec("sphere", point=c.center, radius=c.radius, **common))
     return out
 
 
@@ -64,122 +54,74 @@ class Scene:
         self.t = 0.0
         self.frame = 0
         self.frame_dt = 1.0 / cfg.fps
-        sol = cfg.solver
-        self.method = sol.integrator
-        self.adaptive = sol.adaptive
         self.stats = Stats()
-        self._h_last = sol.h
-        self.layout = PoolLayout.for_emitters(cfg.emitters, self.frame_dt)
-        self.emitters = Emitters(cfg.emitters, self.layout, None, cfg.seed)
-        self.state = ParticleState(self.layout.capacity, self.adaptive, self.emitters.uses_events)
-        self.emitters.state = self.state
-        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag)
-        self.colliders = Colliders(collider_specs(cfg.colliders))
-        self._moving_colliders = any(s.path for s in self.colliders.specs)
-        collide = self.colliders.make_func() if self.colliders.count else None
-        self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
-                                             self.method, self.adaptive,
-                                             events=self.emitters.uses_events)
-        self.emitters.build()
+        specs = collider_specs(cfg.colliders)
+        self.colliders = Colliders(specs)
+        self.particles = ParticleSystem(cfg, self.colliders, self.stats) if cfg.emitters else None
+        self.bodies = []
+        if cfg.bodies:
+            from .bodies import Body
+
+            for b in cfg.bodies:
+                self.bodies.append(Body(b, specs, cfg.forces.gravity, cfg.solver.integrator))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
             from .render.raster import Renderer
 
-            self.renderer = Renderer(self.state, cfg.emitters, self.colliders, cfg.render, width, height)
-        if self.adaptive:
-            self.controller = StepDoublingController(order=METHODS[self.method].order)
-            self._h_try = sol.h
-            self._atol = sol.atol if sol.atol is not None else sol.tolerance
+            p = self.particles
+            self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
+                                     width, height, bodies=self.bodies)
 
     # -- stepping -----------------------------------------------------------------------------
-    def _substep_fixed(self, h):
-        if self._moving_colliders:
-            self.colliders.move_to(self.t + h)
-        self.integrator.step_fixed(self.t, h)
-        self._h_last = h
-        self.stats.steps += 1
+    def advance(self, dt: float) -> None:
+        """Advance everything by dt seconds (any length), landing exactly on t + dt."""
+        if self.particles is not None:
+            self.particles.advance(self.t, dt)
+        for k, body in enumerate(self.bodies):
+            try:
+                body.step(self.t, dt)
+            except Exception as e:
+                from .springs import SimulationDiverged, StiffnessError
 
-    def _advance_adaptive(self, t_target):
-        sol = self.cfg.solver
-        steps = 0
-        while self.t < t_target:
-            if steps >= sol.max_steps_per_frame:
-                raise DivergenceError(
-                    f"integrator {self.method}: more than {sol.max_steps_per_frame} steps in the frame "
-                    f"ending t={t_target:.4g} s (h={self._h_try:.3g} s); raise solver.tolerance or "
-                    f"solver.max_steps_per_frame")
-            h, lands = clip_to_target(self.t, self._h_try, t_target)
-            self.emitters.emit(self.t, h)  # newborns wait (negative age) if the step shrinks
-            if self._moving_colliders:
-                self.colliders.move_to(self.t + h)
-            err = self.integrator.attempt(self.t, h, self._atol, sol.tolerance)
-            ok, h_new = self.controller.propose(h, err)
-            steps += 1
-            if not ok:
-                self.stats.rejected += 1
-                self._h_try = h_new
-                if h_new < 1e-9:
-                    raise DivergenceError(
-                        f"integrator {self.method} diverged at t={self.t:.4g} s: step size fell to "
-                        f"h={h_new:.3g} s (error estimate {err:.3g})")
-                continue
-            self.integrator.commit(self.t, h)
-            self._h_last = h
-            self.emitters.emit_children()
-            self.t = t_target if lands else self.t + h
-            self.stats.steps += 1
-            self.stats.h_min = min(self.stats.h_min, h)
-            self.stats.h_max = max(self.stats.h_max, h)
-            self._h_try = max(h_new, self._h_try) if lands else min(h_new, sol.h * 64)
+                if isinstance(e, (SimulationDiverged, StiffnessError)):
+                    raise DivergenceError(f"bodies[{k}] ({body.cfg.type}): {e}") from None
+                raise
+        self.t += dt
 
-    def advance(self, dt: float):
-        """Advance by dt seconds (any length), landing exactly on t + dt."""
-        t_target = self.t + dt
-        if self.adaptive:
-            self._advance_adaptive(t_target)
-        else:
-            n = max(1, math.ceil(dt / self.cfg.solver.h - 1e-9))
-            h = dt / n  # equal substeps that land exactly on the target
-            for j in range(n):
-                self.emitters.emit(self.t, h)
-                self._substep_fixed(h)
-                self.emitters.emit_children()
-                self.t = t_target if j == n - 1 else self.t + h
-            self.stats.h_min = min(self.stats.h_min, h)
-            self.stats.h_max = max(self.stats.h_max, h)
-        self._check_finite()
-
-    def _check_finite(self):
-        bad = float(self.integrator.nonfinite_t[None])
-        if bad < NO_FAILURE:
-            raise DivergenceError(
-                f"integrator {self.method} diverged: non-finite particle state at t={bad:.4g} s "
-                f"with h={self._h_last:.4g} s")
-
-    def advance_frame(self):
+    def advance_frame(self) -> None:
         self.advance((self.frame + 1) * self.frame_dt - self.t)
         self.frame += 1
         self.stats.frames += 1
-        alive = int(self.integrator.count_alive())
-        self.stats.alive = alive
-        self.stats.peak_alive = max(self.stats.peak_alive, alive)
+        if self.particles is not None:
+            alive = self.particles.count_alive()
+            self.stats.alive = alive
+            self.stats.peak_alive = max(self.stats.peak_alive, alive)
 
     def render(self) -> np.ndarray:
         return self.renderer.render(self.camera)
 
     # -- read-back ----------------------------------------------------------------------------
+    @property
+    def capacity(self) -> int:
+        return self.particles.layout.capacity if self.particles else 0
+
     def alive_mask(self) -> np.ndarray:
-        return self.state.particle_alive.to_numpy()[: self.layout.capacity].astype(bool)
+        if self.particles is None:
+            return np.zeros(0, bool)
+        S = self.particles.state
+        return (S.particle_alive.to_numpy()[: self.capacity] != 0) & (S.particle_age.to_numpy()[: self.capacity] >= 0)
 
     def positions(self) -> np.ndarray:
         """(N, 3) float32 positions of live particles, in pool order."""
-        m = self.alive_mask()
-        return self.state.particle_pos.to_numpy()[: self.layout.capacity][m]
+        if self.particles is None:
+            return np.zeros((0, 3), np.float32)
+        return self.particles.state.particle_pos.to_numpy()[: self.capacity][self.alive_mask()]
 
     def velocities(self) -> np.ndarray:
-        m = self.alive_mask()
-        return self.state.particle_vel.to_numpy()[: self.layout.capacity][m]
+        if self.particles is None:
+            return np.zeros((0, 3), np.float32)
+        return self.particles.state.particle_vel.to_numpy()[: self.capacity][self.alive_mask()]
 
     def dropped(self) -> int:
-        return int(self.emitters.dropped_counts().sum())
+        return self.particles.dropped() if self.particles else 0

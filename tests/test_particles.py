@@ -131,7 +131,7 @@ def test_scene_keeps_particles_out_of_plane_and_sphere():
         p = s.positions()
         assert p[:, 1].min() >= -1e-5
         assert np.linalg.norm(p - [0.3, 0.6, 0.0], axis=1).min() >= 0.5 * (1 - 1e-5)
-    assert s.integrator.hits[None] > 1000
+    assert s.particles.integrator.hits[None] > 1000
 
 
 def test_single_particle_with_drag_matches_closed_form_rk4():
@@ -216,4 +216,4 @@ def test_pool_is_sized_from_the_emitters():
                                         "bursts": [{"count": 300, "cycles": 10, "interval": 0.2}]}])
     s = make(d)
     # 200/s × (1.5 s + one frame) + 8 slack; bursts overlapping within a lifetime: 300 × (ceil(0.5/0.2)+1)
-    assert s.layout.sizes == [math.ceil(200 * (1.5 + 1 / 30)) + 8, 300 * 4 + 8]
+    assert s.particles.layout.sizes == [math.ceil(200 * (1.5 + 1 / 30)) + 8, 300 * 4 + 8]

@@ -194,6 +194,58 @@ class Vortex(Strict):
         return self
 
 
+class Body(Strict):
+    """A soft body: a spring network built by a topology builder (engine/springs/topology.py).
+
+    chain: ``segments`` + 1 nodes from ``position`` along ``direction`` over ``length``.
+    hair: ``strands`` strands of ``segments`` from roots on a scalp cap (centre ``position``,
+    ``radius``, ``cap_angle``) or a line (``position`` → ``line_end``). cloth: a
+    ``resolution = [nx, ny]`` grid of ``size = [w, d]`` in ``plane`` "xz" (flat) or "xy" (hanging)
+    from ``position``. jelly: a ``resolution = [nx, ny, nz]`` lattice of ``size = [x, y, z]``.
+    Stiffness in N/m, damping in N·s/m, mass per node in kg."""
+
+    name: str = ""
+    type: Literal["chain", "hair", "cloth", "jelly"]
+    position: Vec3 = [0.0, 1.0, 0.0]
+    direction: Vec3 = [0.0, -1.0, 0.0]
+    length: Annotated[float, Field(gt=0, le=100)] = 1.0
+    segments: Annotated[int, Field(ge=1, le=1000)] = 20
+    strands: Annotated[int, Field(ge=1, le=5000)] = 40
+    roots: Literal["scalp", "line"] = "scalp"
+    radius: Annotated[float, Field(gt=0, le=100)] = 0.3
+    cap_angle: Annotated[float, Field(gt=0, le=180)] = 60.0  # degrees
+    line_end: Vec3 = [1.0, 1.0, 0.0]
+    resolution: Annotated[List[Annotated[int, Field(ge=2, le=512)]], Field(min_length=2, max_length=3)] = [16, 16]
+    size: Annotated[List[Positive], Field(min_length=2, max_length=3)] = [1.0, 1.0]
+    plane: Literal["xz", "xy"] = "xz"
+    mass: Annotated[float, Field(gt=0, le=1e3)] = 0.01
+    stiffness: Annotated[float, Field(gt=0, le=1e9)] = 1e3
+    damping: NonNeg = 0.0
+    bend_stiffness: Optional[Annotated[float, Field(ge=0, le=1e9)]] = None
+    pins: Union[Literal["none", "start", "corners", "top"], List[Annotated[int, Field(ge=0)]]] = "start"
+    pin_path: List[Keyframe] = []  # pinned nodes follow this path (offsets from their start)
+    release_at: Optional[NonNeg] = None  # seconds: every pin lets go
+    integrator: Optional[Literal["euler", "midpoint", "rk4", "symplectic_euler", "verlet", "xpbd"]] = None
+    substeps: Union[Literal["auto"], Annotated[int, Field(ge=1, le=10_000)]] = "auto"
+    iterations: Annotated[int, Field(ge=1, le=200)] = 10  # XPBD solver iterations per substep
+    max_stretch: Optional[Annotated[float, Field(ge=0, le=10)]] = None  # inextensibility cap
+    thickness: Annotated[float, Field(ge=0, le=1)] = 0.015  # m kept between nodes and colliders
+    color: Annotated[List[Annotated[float, Field(ge=0, le=10)]], Field(min_length=3, max_length=3)] = [0.55, 0.6, 0.7]
+
+    @model_validator(mode="after")
+    def _check(self):
+        dims = 3 if self.type == "jelly" else 2
+        if self.type in ("cloth", "jelly"):
+            if len(self.resolution) != dims:
+                raise ValueError(f"resolution: {self.type} needs {dims} numbers, got {self.resolution}")
+            if len(self.size) != dims:
+                raise ValueError(f"size: {self.type} needs {dims} numbers, got {self.size}")
+        if math.fsum(c * c for c in self.direction) < 1e-12:
+            raise ValueError(f"direction: must not be zero, got {self.direction}")
+        _check_path(self.pin_path)
+        return self
+
+
 class Camera(Strict):
     position: Vec3 = [0.0, 2.0, 8.0]
     look_at: Vec3 = [0.0, 1.0, 0.0]
@@ -239,13 +291,16 @@ class Scene(Strict):
     solver: Solver = Solver()
     forces: Forces = Forces()
     render: Render = Render()
-    emitters: Annotated[List[Emitter], Field(min_length=1, max_length=64)]
+    emitters: Annotated[List[Emitter], Field(max_length=64)] = []
+    bodies: Annotated[List[Body], Field(max_length=32)] = []
     colliders: Annotated[List[Collider], Field(max_length=64)] = []
 
     @model_validator(mode="after")
     def _check(self):
         if self.duration is not None and self.frames is not None:
             raise ValueError("frames: give either duration or frames, not both")
+        if not self.emitters and not self.bodies:
+            raise ValueError("emitters: a scene needs at least one emitter or one body")
         names = [e.name for e in self.emitters]
         targets = set()
         for i, em in enumerate(self.emitters):

@@ -29,7 +29,11 @@ vec3 = ti.types.vector(3, ti.f32)
 
 
 class Renderer:
-    def __init__(self, state, emitter_configs, colliders, render_cfg, width=None, height=None):
+    """Draws one scene. ``state``/``emitter_configs`` may be None/empty (a soft-body scene:
+    no splat kernel is built); ``bodies`` are drawn as meshes and lines (engine.render.mesh)."""
+
+    def __init__(self, state, emitter_configs, colliders, render_cfg, width=None, height=None,
+                 bodies=()):
         self.W = int(width or render_cfg.width)
         self.H = int(height or render_cfg.height)
         W, H = self.W, self.H
@@ -42,6 +46,20 @@ class Renderer:
         self.bg = ti.Vector.field(3, ti.f32, shape=(H, W))
         self.depth = ti.field(ti.f32, shape=(H, W))
         E = len(emitter_configs)
+        self.has_particles = state is not None and E > 0
+        self.uses_alpha = self.has_particles and any(c.blend == "alpha" for c in emitter_configs)
+        self.uses_additive = self.has_particles and any(c.blend == "additive" for c in emitter_configs)
+        self._build_background(colliders)
+        if self.has_particles:
+            self._build_particles(state, emitter_configs)
+        self.mesh = None
+        if bodies:
+            from .mesh import MeshLayer
+
+            self.mesh = MeshLayer(bodies, self)
+
+    def _build_particles(self, state, emitter_configs):
+        E = len(emitter_configs)
         self.color = Curves([e.color for e in emitter_configs], 3)
         self.alpha = Curves([e.alpha for e in emitter_configs], 1)
         self.size = Curves([e.size for e in emitter_configs], 1)
@@ -52,14 +70,10 @@ class Renderer:
             self.emitter_additive[e] = int(c.blend == "additive")
             self.emitter_streak[e] = c.streak
             self.emitter_size_rand[e] = c.size_randomness
-        self.uses_alpha = any(c.blend == "alpha" for c in emitter_configs)
-        self.uses_additive = any(c.blend == "additive" for c in emitter_configs)
-        self._build(state, colliders)
-
-    def _build(self, S, colliders):
-        W, H, cfg = self.W, self.H, self.cfg
-        image, light, oit_rgb, oit_w, oit_logT, bg, depth = (
-            self.image, self.light, self.oit_rgb, self.oit_w, self.oit_logT, self.bg, self.depth)
+        W, H = self.W, self.H
+        light, oit_rgb, oit_w, oit_logT, depth = (
+            self.light, self.oit_rgb, self.oit_w, self.oit_logT, self.depth)
+        S = state
         pos, vel, age, life, alive, pem, prand = (
             S.particle_pos, S.particle_vel, S.particle_age, S.particle_life, S.particle_alive,
             S.particle_emitter, S.particle_rand)
@@ -67,85 +81,8 @@ class Renderer:
         color_at, alpha_at, size_at = (self.color.make_func(), self.alpha.make_func(),
                                        self.size.make_func())
         additive, streak, size_rand = self.emitter_additive, self.emitter_streak, self.emitter_size_rand
-        bgc = tuple(float(c) for c in cfg.background)
-        show = cfg.show_colliders and colliders is not None
-        vis = [k for k, s in enumerate(colliders.specs) if s.visible] if show else []
-        planes = tuple(k for k in vis if colliders.kinds[k] == PLANE)
-        spheres = tuple(k for k in vis if colliders.kinds[k] != PLANE)
-        ground_grid = bool(cfg.grid) and not planes
-        if colliders is not None:
-            cpt, cnr, crad = colliders.collider_point, colliders.collider_normal, colliders.collider_radius
-        else:
-            cpt = cnr = crad = None
         uses_alpha, uses_add = self.uses_alpha, self.uses_additive
-        shading = float(cfg.density_shading)
         aspect = W / H
-
-        @ti.func
-        def ray_dir(px, py, f, r, u, th):
-            x = (2.0 * (px + 0.5) / W - 1.0) * th * aspect
-            y = (1.0 - 2.0 * (py + 0.5) / H) * th
-            return (f + x * r + y * u).normalized()
-
-        @ti.func
-        def grid_shade(o, d, p0, n, th, f, col, zbest):
-            """A faint 1 m grid on the plane (p0, n) seen along ray o + s d."""
-            dn = d.dot(n)
-            z = zbest
-            if dn < -1e-6:
-                s = (p0 - o).dot(n) / dn
-                zz = s * d.dot(f)
-                if s > 0 and zz < zbest:
-                    q = o + s * d
-                    a = ti.Vector([1.0, 0.0, 0.0]) if ti.abs(n[0]) < 0.9 else ti.Vector([0.0, 0.0, 1.0])
-                    e1 = n.cross(a).normalized()
-                    e2 = n.cross(e1)
-                    uu, vv = (q - p0).dot(e1), (q - p0).dot(e2)
-                    foot = s * 2.0 * th / H / ti.max(ti.abs(dn), 0.05)  # metres per pixel
-                    du = ti.abs(uu - ti.round(uu))
-                    dv = ti.abs(vv - ti.round(vv))
-                    line = ti.max(ti.max(0.0, 1.0 - du / (1.2 * foot)), ti.max(0.0, 1.0 - dv / (1.2 * foot)))
-                    line *= ti.min(1.0, 0.25 / foot)  # fade lines that become finer than a pixel
-                    fade = ti.exp(-s / 40.0)
-                    col = (ti.Vector([0.018, 0.019, 0.022]) + line * ti.Vector([0.030, 0.032, 0.036])) * fade \
-                        + col * (1.0 - fade)
-                    z = zz
-            return col, z
-
-        @ti.kernel
-        def background(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
-            for py, px in bg:
-                d = ray_dir(px, py, f, r, u, th)
-                tsky = 0.5 + 0.5 * d[1]
-                col = ti.Vector([bgc[0], bgc[1], bgc[2]]) * (0.6 + 0.8 * tsky)
-                z = 1e30
-                if ti.static(ground_grid):
-                    col, z = grid_shade(o, d, ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 1.0, 0.0]),
-                                        th, f, col, z)
-                for k in ti.static(planes):
-                    col, z = grid_shade(o, d, cpt[k], cnr[k], th, f, col, z)
-                for k in ti.static(spheres):
-                    oc = o - cpt[k]
-                    b = oc.dot(d)
-                    c = oc.dot(oc) - crad[k] * crad[k]
-                    disc = b * b - c
-                    if disc > 0:
-                        s = -b - ti.sqrt(disc)
-                        zz = s * d.dot(f)
-                        if s > 0 and zz < z:
-                            n = (o + s * d - cpt[k]).normalized()
-                            ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
-                            lam = ti.max(0.0, n.dot(ldir))
-                            rim = ti.pow(1.0 - ti.abs(n.dot(d)), 3.0)
-                            col = ti.Vector([0.02, 0.021, 0.025]) + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) \
-                                + 0.03 * rim
-                            z = zz
-                bg[py, px] = col
-                depth[py, px] = z
-                light[py, px] = ti.Vector([0.0, 0.0, 0.0])
-                oit_rgb[py, px] = ti.Vector([0.0, 0.0, 0.0])
-                oit_w[py, px] = 0.0
-                oit_logT[py, px] = 0.0
 
         @ti.func
         def deposit(cx, cy, rad, z, col, a, is_add, energy, soft):
@@ -220,6 +157,92 @@ class Renderer:
                         else:
                             deposit(cx, cy, rad, z, col, a, is_add, energy, soft)
 
+        self._splat = splat
+
+    def _build_background(self, colliders):
+        W, H, cfg = self.W, self.H, self.cfg
+        image, light, oit_rgb, oit_w, oit_logT, bg, depth = (
+            self.image, self.light, self.oit_rgb, self.oit_w, self.oit_logT, self.bg, self.depth)
+        uses_alpha, uses_add = self.uses_alpha, self.uses_additive
+        bgc = tuple(float(c) for c in cfg.background)
+        show = cfg.show_colliders and colliders is not None
+        vis = [k for k, s in enumerate(colliders.specs) if s.visible] if show else []
+        planes = tuple(k for k in vis if colliders.kinds[k] == PLANE)
+        spheres = tuple(k for k in vis if colliders.kinds[k] != PLANE)
+        ground_grid = bool(cfg.grid) and not planes
+        if colliders is not None:
+            cpt, cnr, crad = colliders.collider_point, colliders.collider_normal, colliders.collider_radius
+        else:
+            cpt = cnr = crad = None
+        shading = float(cfg.density_shading)
+        aspect = W / H
+
+        @ti.func
+        def ray_dir(px, py, f, r, u, th):
+            x = (2.0 * (px + 0.5) / W - 1.0) * th * aspect
+            y = (1.0 - 2.0 * (py + 0.5) / H) * th
+            return (f + x * r + y * u).normalized()
+
+        @ti.func
+        def grid_shade(o, d, p0, n, th, f, col, zbest):
+            """A faint 1 m grid on the plane (p0, n) seen along ray o + s d."""
+            dn = d.dot(n)
+            z = zbest
+            if dn < -1e-6:
+                s = (p0 - o).dot(n) / dn
+                zz = s * d.dot(f)
+                if s > 0 and zz < zbest:
+                    q = o + s * d
+                    a = ti.Vector([1.0, 0.0, 0.0]) if ti.abs(n[0]) < 0.9 else ti.Vector([0.0, 0.0, 1.0])
+                    e1 = n.cross(a).normalized()
+                    e2 = n.cross(e1)
+                    uu, vv = (q - p0).dot(e1), (q - p0).dot(e2)
+                    foot = s * 2.0 * th / H / ti.max(ti.abs(dn), 0.05)  # metres per pixel
+                    du = ti.abs(uu - ti.round(uu))
+                    dv = ti.abs(vv - ti.round(vv))
+                    line = ti.max(ti.max(0.0, 1.0 - du / (1.2 * foot)), ti.max(0.0, 1.0 - dv / (1.2 * foot)))
+                    line *= ti.min(1.0, 0.25 / foot)  # fade lines that become finer than a pixel
+                    fade = ti.exp(-s / 40.0)
+                    col = (ti.Vector([0.018, 0.019, 0.022]) + line * ti.Vector([0.030, 0.032, 0.036])) * fade \
+                        + col * (1.0 - fade)
+                    z = zz
+            return col, z
+
+        @ti.kernel
+        def background(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
+            for py, px in bg:
+                d = ray_dir(px, py, f, r, u, th)
+                tsky = 0.5 + 0.5 * d[1]
+                col = ti.Vector([bgc[0], bgc[1], bgc[2]]) * (0.6 + 0.8 * tsky)
+                z = 1e30
+                if ti.static(ground_grid):
+                    col, z = grid_shade(o, d, ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 1.0, 0.0]),
+                                        th, f, col, z)
+                for k in ti.static(planes):
+                    col, z = grid_shade(o, d, cpt[k], cnr[k], th, f, col, z)
+                for k in ti.static(spheres):
+                    oc = o - cpt[k]
+                    b = oc.dot(d)
+                    c = oc.dot(oc) - crad[k] * crad[k]
+                    disc = b * b - c
+                    if disc > 0:
+                        s = -b - ti.sqrt(disc)
+                        zz = s * d.dot(f)
+                        if s > 0 and zz < z:
+                            n = (o + s * d - cpt[k]).normalized()
+                            ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
+                            lam = ti.max(0.0, n.dot(ldir))
+                            rim = ti.pow(1.0 - ti.abs(n.dot(d)), 3.0)
+                            col = ti.Vector([0.02, 0.021, 0.025]) + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) \
+                                + 0.03 * rim
+                            z = zz
+                bg[py, px] = col
+                depth[py, px] = z
+                light[py, px] = ti.Vector([0.0, 0.0, 0.0])
+                oit_rgb[py, px] = ti.Vector([0.0, 0.0, 0.0])
+                oit_w[py, px] = 0.0
+                oit_logT[py, px] = 0.0
+
         @ti.func
         def aces(x):
             return ti.math.clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
@@ -247,7 +270,7 @@ class Renderer:
                 for ch in ti.static(range(3)):
                     image[py, px, ch] = ti.cast(ti.min(255.0, out[ch] * 255.0 + 0.5), ti.u8)
 
-        self._background, self._splat, self._resolve = background, splat, resolve
+        self._background, self._resolve = background, resolve
 
     def render(self, camera, exposure=None) -> np.ndarray:
         """Render the pool as seen by ``camera``; returns an (H, W, 3) uint8 sRGB image."""
@@ -255,6 +278,10 @@ class Renderer:
         th = camera.tan_half
         args = (p.tolist(), f.tolist(), r.tolist(), u.tolist(), th)
         self._background(*args)
-        self._splat(*args)
+        if self.mesh is not None:
+            self.mesh.update()
+            self.mesh.draw(args)
+        if self.has_particles:
+            self._splat(*args)
         self._resolve(self.cfg.exposure if exposure is None else exposure)
         return self.image.to_numpy()
