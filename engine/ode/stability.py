@@ -135,27 +135,34 @@ def largest_stable_h(method: str, ks: float, kd: float, m: float = 1.0, steps: i
 
 # ---- linear stability theory (NumPy, independent of the Taichi steppers) ----
 
-def step_matrix(method: str, h: float, ks: float, kd: float, m: float = 1.0) -> np.ndarray:
-    """The 2×2 matrix M with (q, v)⁺ = M (q, v) for one step of ``method`` on the spring."""
+def step_matrix(method: str, h, ks: float, kd: float, m: float = 1.0) -> np.ndarray:
+    """The 2×2 matrices M with (q, v)⁺ = M (q, v) for one step of ``method`` on the spring; ``h``
+    may be an array (result shape ``h.shape + (2, 2)``)."""
+    h = np.asarray(h, dtype=np.float64)[..., None, None]
     w2, c = ks / m, kd / m
+    one, zero = np.ones_like(h), np.zeros_like(h)
+    mat = lambda a, b, cc, d: np.concatenate(  # noqa: E731
+        [np.concatenate([a, b], -1), np.concatenate([cc, d], -1)], -2)
     if method in ("euler", "midpoint", "rk4"):
         A = h * np.array([[0.0, 1.0], [-w2, -c]])
-        M, term = np.eye(2), np.eye(2)
+        M = term = np.broadcast_to(np.eye(2), A.shape)
         for k in range(1, METHODS[method].order + 1):  # explicit RK with s = p: R(z) = Σ z^k/k!
             term = term @ A / k
             M = M + term
         return M
-    drift = np.array([[1.0, h], [0.0, 1.0]])
+    drift = mat(one, h, zero, one)
     if method == "symplectic_euler":  # v⁺ = v + h a(q, v); q⁺ = q + h v⁺
-        return drift @ np.array([[1.0, 0.0], [-h * w2, 1.0 - h * c]])
+        return drift @ mat(one, zero, -h * w2, 1.0 - h * c)
     if method == "verlet":  # half kick a(q, v), drift, half kick a(q⁺, v½)
-        kick = np.array([[1.0, 0.0], [-0.5 * h * w2, 1.0 - 0.5 * h * c]])
+        kick = mat(one, zero, -0.5 * h * w2, 1.0 - 0.5 * h * c)
         return kick @ drift @ kick
     raise ValueError(f"method: unknown value {method!r}; allowed: {', '.join(METHODS)}")
 
 
-def spectral_radius(method: str, h: float, ks: float, kd: float, m: float = 1.0) -> float:
-    return float(np.max(np.abs(np.linalg.eigvals(step_matrix(method, h, ks, kd, m)))))
+def spectral_radius(method: str, h, ks: float, kd: float, m: float = 1.0):
+    """Largest |eigenvalue| of :func:`step_matrix` (vectorised over ``h``)."""
+    r = np.max(np.abs(np.linalg.eigvals(step_matrix(method, h, ks, kd, m))), axis=-1)
+    return float(r) if r.ndim == 0 else r
 
 
 def theory_limit(method: str, ks: float, kd: float, m: float = 1.0) -> float:
@@ -164,10 +171,9 @@ def theory_limit(method: str, ks: float, kd: float, m: float = 1.0) -> float:
     if kd == 0 and method in ("euler", "midpoint"):
         return 0.0
     w = math.sqrt(ks / m)
-    hs = np.linspace(0.0, 4.0 / w, 4001)[1:]
     tol = 1e-10
-    stable = np.array([spectral_radius(method, h, ks, kd, m) <= 1 + tol for h in hs])
-    bad = np.nonzero(~stable)[0]
+    hs = np.linspace(0.0, 4.0 / w, 4001)[1:]
+    bad = np.nonzero(spectral_radius(method, hs, ks, kd, m) > 1 + tol)[0]
     if bad.size == 0:
         return math.inf
     g = bad[0]
@@ -175,7 +181,7 @@ def theory_limit(method: str, ks: float, kd: float, m: float = 1.0) -> float:
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if spectral_radius(method, mid, ks, kd, m) <= 1 + tol else (lo, mid)
-    return lo
+    return float(lo)
 
 
 def numerics_formula(method: str, ks: float, kd: float, m: float = 1.0) -> Union[float, None]:
