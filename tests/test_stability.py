@@ -64,3 +64,12 @@ def test_bad_arguments():
         largest_stable_h("rk5", 100.0, 0.0)
     with pytest.raises(ValueError, match="ks > 0"):
         largest_stable_h("rk4", -1.0, 0.0)
+
+
+@pytest.mark.parametrize("method", ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"])
+def test_measurement_tracks_theory_across_stiffness(method):
+    ks = np.array([10.0, 1e3, 1e5, 10.0, 1e3, 1e5])
+    kd = np.array([1.0, 1.0, 1.0, 20.0, 20.0, 20.0])  # kd = 20, ks = 10 is overdamped
+    got = largest_stable_h_batch(method, ks, kd)
+    want = [theory_limit(method, a, b) for a, b in zip(ks, kd)]
+    np.testing.assert_allclose(got, want, rtol=0.01)
