@@ -52,7 +52,7 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
     quick: coarser sweeps and shorter runs (well under a minute in total), for tests.
     """
     from . import plot
-    from .workprec import CASES, FIELDS, require_scipy, work_precision
+    from .workprec import CASES, FIELDS, T_LABEL, require_scipy, work_precision
 
     plot.require_matplotlib()
     require_scipy()
@@ -63,10 +63,10 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
     for name in problems:
         rows = work_precision(name, quick=quick)
         case = CASES[name]
-        T = case.problem.t_span[1]
+        T = T_LABEL.get(name, f"T = {case.problem.t_span[1]:g}")
         base = os.path.join(out_dir, f"workprec_{name}")
         written.append(plot.write_csv(base + ".csv", rows, FIELDS))
-        title = (f"Work–precision, {name} (T = {T:.6g}): fixed h for every method, step doubling over "
+        title = (f"Work–precision, {name} ({T}): fixed h for every method, step doubling over "
                  f"tol = rtol (atol = tol·1e-3), scipy solve_ivp as anchor")
         written.append(plot.work_precision_png(base + ".png", rows, title, _NUMERICS_REFS.get(name, ())))
     if "stability" in names:
@@ -77,12 +77,12 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
         written.append(plot.write_csv(base + ".csv", rows, list(rows[0])))
         written.append(plot.stability_png(base + ".png", rows, NUMERICS_TABLE))
     if "energy" in names:
-        from .energy import H, energy_drift
+        from .energy import H, TITLES, energy_drift
 
         rows = energy_drift(quick=quick)
         base = os.path.join(out_dir, "energy_drift")
         written.append(plot.write_csv(base + ".csv", rows, list(rows[0])))
-        written.append(plot.energy_png(base + ".png", rows, H))
+        written.append(plot.energy_png(base + ".png", rows, H, TITLES))
     return written
 
 

@@ -49,6 +49,10 @@ SYSTEMS = {
     f"chain{CHAIN_N}": (_chain, CHAIN_Y0, chain_energy),
 }
 
+TITLES = {"oscillator": "harmonic oscillator, ω = 2 (hω = 1/32)",
+          f"chain{CHAIN_N}": f"chain of {CHAIN_N} unit masses, unit springs, fixed ends "
+                             f"(hω_max ≈ {2 * np.sin(CHAIN_N * np.pi / (2 * CHAIN_N + 2)) / 64:.3f})"}
+
 
 def energy_drift(quick: bool = False) -> List[dict]:
     """Rows (system, method, step, t, energy, rel_error) for every system and method."""

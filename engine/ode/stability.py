@@ -5,14 +5,20 @@ The spring: m q'' = −ks q − kd q' (ω² = ks/m, c = kd/m), y = (q, v), q(0) 
 *Measured* (:func:`largest_stable_h`): the engine's own ``ti.func`` stepper runs ``steps`` steps in
 a batched kernel, one Taichi thread per candidate h (and per spring), deterministic. A run counts
 as stable when it stays finite and the largest energy E = ½ m v² + ½ ks q² over the last tenth of
-the run is at most :data:`GROWTH_LIMIT` (1.001) times the largest over the first tenth: stable
-runs of a damped spring lose energy, bounded ones (symplectic methods, undamped) repeat the same
-envelope. Bisection refines a grid of :data:`GRID` candidates per round to the first unstable step.
-Growth below the limit goes unnoticed, so the measurement sits slightly above the linear-stability
-limit where the growth rate there is tiny (explicit Euler with kd = 1: +0.5% at ks = 1e5, <0.01% at
-ks = 100, over 20,000 steps) and tends to it as ``steps`` grows. Methods with no stable step on an
-undamped spring (explicit Euler, midpoint) get the finite-run artefact: the h at which the energy
-grows by 0.1% over the run, which → 0 as ``steps`` → ∞.
+the run is at most a growth limit times the largest over the first tenth:
+
+* damped (kd > 0): limit :data:`GROWTH_LIMIT_DAMPED` = 1.001. A stable damped run loses energy, so
+  any net growth means instability. Growth below the limit goes unnoticed, so the measurement sits
+  slightly above the linear-stability limit where the growth rate there is tiny (explicit Euler with
+  kd = 1: +0.5% at ks = 1e5, <0.01% at ks = 100, over 20,000 steps).
+* undamped (kd = 0): limit :data:`GROWTH_LIMIT_UNDAMPED` = 2. A stable run's energy only stays
+  bounded and oscillates; when the rotation per step is close to a rational fraction of 2π the
+  sampled peaks differ between windows by up to ~(hω)³/16 (a 1.001 limit flagged 28 of 8,000
+  stable symplectic-Euler steps), so growth must be unmistakable. Methods with no stable step
+  (explicit Euler, midpoint) then get the finite-run artefact: the h at which the energy doubles
+  within the run, which → 0 as ``steps`` → ∞.
+
+Bisection refines a grid of :data:`GRID` candidates per round to the first unstable step.
 
 *Predicted* (:func:`theory_limit`): the spectral radius of the one-step matrix of the linear
 spring, built independently in NumPy (a truncated exponential for the RK methods, i.e. |R(hλ)|,
@@ -29,7 +35,7 @@ from .steppers import METHODS, is_finite, make_step
 
 GRID = 64  # candidate steps per spring per bisection round
 CAPACITY = 8192  # threads per kernel launch
-GROWTH_LIMIT = 1.001
+GROWTH_LIMIT_DAMPED, GROWTH_LIMIT_UNDAMPED = 1.001, 2.0
 
 _probes: dict = {}
 
@@ -38,7 +44,7 @@ class _Probe:
     """Fields and the batched kernel for one method (built once)."""
 
     def __init__(self, method: str):
-        self.par = par = ti.Vector.field(4, ti.f64, shape=CAPACITY)  # ks, kd, m, h
+        self.par = par = ti.Vector.field(5, ti.f64, shape=CAPACITY)  # ks, kd, m, h, growth limit
         self.ok = ok = ti.field(ti.i32, shape=CAPACITY)
 
         @ti.func
@@ -52,7 +58,7 @@ class _Probe:
         step = make_step(method, spring, 2, ti.f64)
 
         @ti.kernel
-        def probe(n: ti.i32, steps: ti.i32, limit: ti.f64):
+        def probe(n: ti.i32, steps: ti.i32):
             for j in range(n):
                 p = par[j]
                 h = p[3]
@@ -72,7 +78,7 @@ class _Probe:
                     if k >= steps - w:
                         e_last = ti.max(e_last, e)
                 good = 0
-                if blown == 0 and e_last <= limit * e_first:
+                if blown == 0 and e_last <= p[4] * e_first:
                     good = 1
                 ok[j] = good
 
@@ -82,11 +88,12 @@ class _Probe:
         out = np.empty(len(h), dtype=bool)
         for s in range(0, len(h), CAPACITY):
             e = min(len(h), s + CAPACITY)
-            buf = np.zeros((CAPACITY, 4))
-            buf[: e - s] = np.stack([ks[s:e], kd[s:e], m[s:e], h[s:e]], axis=1)
+            buf = np.zeros((CAPACITY, 5))
+            limit = np.where(kd[s:e] > 0, GROWTH_LIMIT_DAMPED, GROWTH_LIMIT_UNDAMPED)
+            buf[: e - s] = np.stack([ks[s:e], kd[s:e], m[s:e], h[s:e], limit], axis=1)
             buf[e - s:, 2] = 1.0
             self.par.from_numpy(buf)
-            self.probe(e - s, steps, GROWTH_LIMIT)
+            self.probe(e - s, steps)
             out[s:e] = self.ok.to_numpy()[: e - s].astype(bool)
         return out
 
@@ -199,4 +206,4 @@ def numerics_formula(method: str, ks: float, kd: float, m: float = 1.0) -> Union
 
 
 __all__: Sequence[str] = ["largest_stable_h", "largest_stable_h_batch", "theory_limit",
-                          "numerics_formula", "step_matrix", "spectral_radius", "GROWTH_LIMIT"]
+                          "numerics_formula", "step_matrix", "spectral_radius"]
