@@ -10,9 +10,13 @@ Units: metres, seconds, degrees for angles; colours are linear RGB (values above
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, List, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from ..particles.capacity import MAX_POOL, emitter_capacity
 
 INTEGRATORS = ("euler", "midpoint", "rk4", "symplectic_euler", "verlet")
 
@@ -34,14 +38,66 @@ ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_le
 MAX_STOPS = 8
 
 
-def _check_curve(stops, name):
+def _check_curve(stops):
     if stops is None:
-        return
+        return None
     if not 1 <= len(stops) <= MAX_STOPS:
-        raise ValueError(f"{name}: needs 1 to {MAX_STOPS} stops, got {len(stops)}")
+        return f"needs 1 to {MAX_STOPS} stops, got {len(stops)}"
     ts = [s[0] for s in stops]
     if any(t < 0 or t > 1 for t in ts) or any(b < a for a, b in zip(ts, ts[1:])):
-        raise ValueError(f"{name}: stop times must lie in [0, 1] and increase, got {ts}")
+        return f"stop times must lie in [0, 1] and increase, got {ts}"
+    return None
+
+
+def _check_path(path):
+    ts = [k.time for k in path]
+    if any(b <= a for a, b in zip(ts, ts[1:])):
+        return f"keyframe times must increase, got {ts}"
+    return None
+
+
+def _report(model, problems):
+    """Raise every cross-key problem found in ``model`` at once, each at its own key:
+    ``problems`` is a list of (key, message) with message None for "no problem"."""
+    errors = [InitErrorDetails(type=PydanticCustomError("config_check", "{text}", {"text": text}),
+                               loc=(key,), input=getattr(model, key, None))
+              for key, text in problems if text]
+    if errors:
+        raise ValidationError.from_exception_data(type(model).__name__, errors)
+    return model
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _check_name(name: str) -> str:
+    """A config name becomes a folder and file name: one plain path component."""
+    if name and (_CONTROL.search(name) or "/" in name or "\\" in name or ":" in name
+                 or name.startswith(".") or len(name) > 100):
+        raise ValueError(f"{name!r} must be a plain file name: no '/', '\\', ':' or control "
+                         f"characters, not starting with '.', at most 100 characters")
+    return name
+
+
+def _check_output(out: Optional[str]) -> Optional[str]:
+    """``output`` is a folder inside the output root (renders/): relative, no '..', no drive."""
+    if out is None:
+        return out
+    parts = out.split("/")
+    why = None
+    if not out.strip():
+        why = "must not be empty"
+    elif _CONTROL.search(out) or "\\" in out or ":" in out:
+        why = "must not hold '\\', ':' (a drive letter) or control characters"
+    elif out.startswith("/") or out.startswith("~"):
+        why = "must be relative to the output folder renders/ (use --out for other places)"
+    elif any(p in ("", ".", "..") for p in parts):
+        why = "must not hold '..', '.' or empty parts: it stays inside renders/"
+    elif len(out) > 200:
+        why = "must be at most 200 characters"
+    if why:
+        raise ValueError(f"{out!r} {why}")
+    return out
 
 
 class Keyframe(Strict):
@@ -91,24 +147,20 @@ class Emitter(Strict):
 
     @model_validator(mode="after")
     def _check(self):
-        for name in ("color", "alpha", "size"):
-            _check_curve(getattr(self, name), name)
-        if self.speed[1] < self.speed[0]:
-            raise ValueError(f"speed: [min, max] needs min <= max, got {self.speed}")
-        if math.fsum(c * c for c in self.direction) < 1e-12:
-            raise ValueError(f"direction: must not be zero, got {self.direction}")
-        if self.stop is not None and self.stop < self.start:
-            raise ValueError(f"stop: {self.stop} is before start {self.start}")
-        if self.rate == 0 and not self.bursts:
-            raise ValueError("rate: an emitter needs a rate > 0 or at least one burst")
-        _check_path(self.path)
-        return self
-
-
-def _check_path(path):
-    ts = [k.time for k in path]
-    if any(b <= a for a, b in zip(ts, ts[1:])):
-        raise ValueError(f"path: keyframe times must increase, got {ts}")
+        return _report(self, [
+            ("color", _check_curve(self.color)),
+            ("alpha", _check_curve(self.alpha)),
+            ("size", _check_curve(self.size)),
+            ("speed", f"[min, max] needs min <= max, got {self.speed}"
+             if self.speed[1] < self.speed[0] else None),
+            ("direction", f"must not be zero, got {self.direction}"
+             if math.fsum(c * c for c in self.direction) < 1e-12 else None),
+            ("stop", f"{self.stop} is before start {self.start}"
+             if self.stop is not None and self.stop < self.start else None),
+            ("rate", "an emitter needs a rate > 0 or at least one burst"
+             if self.rate == 0 and not self.bursts else None),
+            ("path", _check_path(self.path)),
+        ])
 
 
 class _ColliderBase(Strict):
@@ -127,10 +179,11 @@ class PlaneCollider(_ColliderBase):
 
     @model_validator(mode="after")
     def _check(self):
-        if math.fsum(c * c for c in self.normal) < 1e-12:
-            raise ValueError(f"normal: must not be zero, got {self.normal}")
-        _check_path(self.path)
-        return self
+        return _report(self, [
+            ("normal", f"must not be zero, got {self.normal}"
+             if math.fsum(c * c for c in self.normal) < 1e-12 else None),
+            ("path", _check_path(self.path)),
+        ])
 
 
 class SphereCollider(_ColliderBase):
@@ -140,8 +193,7 @@ class SphereCollider(_ColliderBase):
 
     @model_validator(mode="after")
     def _check(self):
-        _check_path(self.path)
-        return self
+        return _report(self, [("path", _check_path(self.path))])
 
 
 Collider = Annotated[Union[PlaneCollider, SphereCollider], Field(discriminator="type")]
@@ -180,6 +232,7 @@ class Render(Strict):
 
 class Scene(Strict):
     name: str = ""
+    output: Optional[str] = None  # folder under renders/ (default: name); --out overrides
     seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
     fps: Annotated[float, Field(ge=1, le=1000)] = 30.0
     duration: Optional[Annotated[float, Field(gt=0, le=3600)]] = None
@@ -191,11 +244,27 @@ class Scene(Strict):
     emitters: Annotated[List[Emitter], Field(min_length=1, max_length=64)]
     colliders: Annotated[List[Collider], Field(max_length=64)] = []
 
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v):
+        return _check_name(v)
+
+    @field_validator("output")
+    @classmethod
+    def _output(cls, v):
+        return _check_output(v)
+
     @model_validator(mode="after")
     def _check(self):
-        if self.duration is not None and self.frames is not None:
-            raise ValueError("frames: give either duration or frames, not both")
-        return self
+        problems = [("frames", "give either duration or frames, not both"
+                     if self.duration is not None and self.frames is not None else None)]
+        slots = [emitter_capacity(em, 1.0 / self.fps) for em in self.emitters]
+        if sum(slots) > MAX_POOL:
+            e = max(range(len(slots)), key=slots.__getitem__)
+            problems.append(("emitters", f"the pool would need {sum(slots):,} particle slots "
+                             f"(emitters[{e}] alone {slots[e]:,}: rate × lifetime + bursts); at most "
+                             f"{MAX_POOL:,}: lower rate or lifetime, or set an emitter's capacity"))
+        return _report(self, problems)
 
     @property
     def frame_count(self) -> int:
