@@ -33,14 +33,16 @@ _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 def key_name(part) -> str:
     """A key as TOML would write it: bare when it can be, else a quoted string with escapes, so a
     key holding a newline, a dot or nothing at all still names itself on one line."""
+    if not isinstance(part, str):
+        part = str(part)
     if _BARE_KEY.fullmatch(part):
         return part
     out = ['"']
     for ch in part:
         if ch in '"\\':
             out.append("\\" + ch)
-        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
-            out.append(f"\\u{ord(ch):04x}")
+        elif not ch.isprintable():  # control and line-break characters (U+0085, U+2028...)
+            out.append(f"\\u{ord(ch):04x}" if ord(ch) <= 0xFFFF else f"\\U{ord(ch):08x}")
         else:
             out.append(ch)
     return "".join(out) + '"'
@@ -132,9 +134,10 @@ def _format_error(e) -> str:
         return f"{path}: {_short(e.get('input'))} is not allowed: {msg[:1].lower() + msg[1:]}"
 
 
-def apply_presets(data: dict) -> dict:
+def apply_presets(data: dict):
     """Fill each emitter from its ``effect`` preset (effects/<name>.py), key by key: what the
-    config says wins. Unknown preset names are reported like any bad value."""
+    config says wins. Returns (data, problems): an unknown preset name is one problem, and the
+    rest of the config is still checked."""
     from effects import PRESETS
 
     data = copy.deepcopy(data)
@@ -147,23 +150,25 @@ def apply_presets(data: dict) -> dict:
                 problems.append(f"emitters[{i}].effect: {_short(name)} is not a preset"
                                 + (f"; did you mean {near[0]!r}?" if near else "")
                                 + f" (presets: {', '.join(PRESETS)})")
+                del em["effect"]  # reported above; check the rest of the emitter as it is
                 continue
             merged = copy.deepcopy(PRESETS[name].EMITTER)
             merged.update(em)
             data["emitters"][i] = merged
-    if problems:
-        raise ConfigError(problems)
-    return data
+    return data, problems
 
 
 def validate(data: dict) -> Scene:
     if not isinstance(data, dict):
         raise ConfigError([f"config: expected a table of keys, got {type(data).__name__}"])
-    data = apply_presets(data)
+    data, problems = apply_presets(data)
     try:
-        return Scene.model_validate(data)
+        scene = Scene.model_validate(data)
     except ValidationError as e:
-        raise ConfigError(format_errors(e)) from None
+        raise ConfigError(problems + format_errors(e)) from None
+    if problems:
+        raise ConfigError(problems)
+    return scene
 
 
 def read_toml(path: Union[str, os.PathLike]) -> dict:
