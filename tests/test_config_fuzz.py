@@ -1,35 +1,27 @@
 """Fuzzing the config check: thousands of malformed configs, each breaking known keys, must give
 exactly one error line per problem, naming its key, through the same code the CLI runs; exit 2,
 no traceback, no output folder. A sample goes through real ``python -m engine`` processes."""
-import contextlib
-import io
 import os
 import re
 import shutil
 import subprocess
 import sys
 import tempfile
-import tomllib
+
+try:
+    import tomllib
+except ImportError:  # Python < 3.11
+    import tomli as tomllib
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from configgen import BASE, apply, malformed, to_toml
-from engine import cli
+from runhelp import ENV, call
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-ENV = dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=ROOT)
 FUZZ_EXAMPLES = 1000
 QUOTED = re.compile(r'"(?:[^"\\]|\\.)*"')
-
-
-def call(*argv):
-    """``particles`` in this process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = cli.main(list(argv))
-    return code, out.getvalue(), err.getvalue()
 
 
 def names(problem: str, m) -> bool:
