@@ -10,9 +10,13 @@ Units: metres, seconds, degrees for angles; colours are linear RGB (values above
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, List, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from ..particles.capacity import MAX_POOL, pool_sizes
 
 INTEGRATORS = ("euler", "midpoint", "rk4", "symplectic_euler", "verlet")
 
@@ -34,14 +38,67 @@ ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_le
 MAX_STOPS = 8
 
 
-def _check_curve(stops, name):
+def _check_curve(stops):
     if stops is None:
-        return
+        return None
     if not 1 <= len(stops) <= MAX_STOPS:
-        raise ValueError(f"{name}: needs 1 to {MAX_STOPS} stops, got {len(stops)}")
+        return f"needs 1 to {MAX_STOPS} stops, got {len(stops)}"
     ts = [s[0] for s in stops]
     if any(t < 0 or t > 1 for t in ts) or any(b < a for a, b in zip(ts, ts[1:])):
-        raise ValueError(f"{name}: stop times must lie in [0, 1] and increase, got {ts}")
+        return f"stop times must lie in [0, 1] and increase, got {ts}"
+    return None
+
+
+def _check_path(path):
+    ts = [k.time for k in path]
+    if any(b <= a for a, b in zip(ts, ts[1:])):
+        return f"keyframe times must increase, got {ts}"
+    return None
+
+
+def _report(model, problems):
+    """Raise every cross-key problem found in ``model`` at once, each at its own key:
+    ``problems`` is a list of (key, message) with message None for "no problem"."""
+    errors = [InitErrorDetails(type=PydanticCustomError("config_check", "{text}", {"text": text}),
+                               loc=key if isinstance(key, tuple) else (key,),
+                               input=getattr(model, key, None) if isinstance(key, str) else None)
+              for key, text in problems if text]
+    if errors:
+        raise ValidationError.from_exception_data(type(model).__name__, errors)
+    return model
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _check_name(name: str) -> str:
+    """A config name becomes a folder and file name: one plain path component."""
+    if name and (_CONTROL.search(name) or "/" in name or "\\" in name or ":" in name
+                 or name.startswith(".") or len(name) > 100):
+        raise ValueError(f"{name!r} must be a plain file name: no '/', '\\', ':' or control "
+                         f"characters, not starting with '.', at most 100 characters")
+    return name
+
+
+def _check_output(out: Optional[str]) -> Optional[str]:
+    """``output`` is a folder inside the output root (renders/): relative, no '..', no drive."""
+    if out is None:
+        return out
+    parts = out.split("/")
+    why = None
+    if not out.strip():
+        why = "must not be empty"
+    elif _CONTROL.search(out) or "\\" in out or ":" in out:
+        why = "must not hold '\\', ':' (a drive letter) or control characters"
+    elif out.startswith("/") or out.startswith("~"):
+        why = "must be relative to the output folder renders/ (use --out for other places)"
+    elif any(p in ("", ".", "..") for p in parts):
+        why = "must not hold '..', '.' or empty parts: it stays inside renders/"
+    elif len(out) > 200:
+        why = "must be at most 200 characters"
+    if why:
+        raise ValueError(f"{out!r} {why}")
+    return out
 
 
 class Keyframe(Strict):
@@ -106,22 +163,18 @@ class Emitter(Strict):
 
     @model_validator(mode="after")
     def _check(self):
-        for name in ("color", "alpha", "size"):
-            _check_curve(getattr(self, name), name)
-        if self.speed[1] < self.speed[0]:
-            raise ValueError(f"speed: [min, max] needs min <= max, got {self.speed}")
-        if math.fsum(c * c for c in self.direction) < 1e-12:
-            raise ValueError(f"direction: must not be zero, got {self.direction}")
-        if self.stop is not None and self.stop < self.start:
-            raise ValueError(f"stop: {self.stop} is before start {self.start}")
-        _check_path(self.path)
-        return self
-
-
-def _check_path(path):
-    ts = [k.time for k in path]
-    if any(b <= a for a, b in zip(ts, ts[1:])):
-        raise ValueError(f"path: keyframe times must increase, got {ts}")
+        return _report(self, [
+            ("color", _check_curve(self.color)),
+            ("alpha", _check_curve(self.alpha)),
+            ("size", _check_curve(self.size)),
+            ("speed", f"[min, max] needs min <= max, got {self.speed}"
+             if self.speed[1] < self.speed[0] else None),
+            ("direction", f"must not be zero, got {self.direction}"
+             if math.fsum(c * c for c in self.direction) < 1e-12 else None),
+            ("stop", f"{self.stop} is before start {self.start}"
+             if self.stop is not None and self.stop < self.start else None),
+            ("path", _check_path(self.path)),
+        ])
 
 
 class _ColliderBase(Strict):
@@ -140,10 +193,11 @@ class PlaneCollider(_ColliderBase):
 
     @model_validator(mode="after")
     def _check(self):
-        if math.fsum(c * c for c in self.normal) < 1e-12:
-            raise ValueError(f"normal: must not be zero, got {self.normal}")
-        _check_path(self.path)
-        return self
+        return _report(self, [
+            ("normal", f"must not be zero, got {self.normal}"
+             if math.fsum(c * c for c in self.normal) < 1e-12 else None),
+            ("path", _check_path(self.path)),
+        ])
 
 
 class SphereCollider(_ColliderBase):
@@ -153,8 +207,7 @@ class SphereCollider(_ColliderBase):
 
     @model_validator(mode="after")
     def _check(self):
-        _check_path(self.path)
-        return self
+        return _report(self, [("path", _check_path(self.path))])
 
 
 Collider = Annotated[Union[PlaneCollider, SphereCollider], Field(discriminator="type")]
@@ -189,9 +242,8 @@ class Vortex(Strict):
 
     @model_validator(mode="after")
     def _check(self):
-        if math.fsum(c * c for c in self.axis) < 1e-12:
-            raise ValueError(f"axis: must not be zero, got {self.axis}")
-        return self
+        return _report(self, [("axis", f"must not be zero, got {self.axis}"
+                               if math.fsum(c * c for c in self.axis) < 1e-12 else None)])
 
 
 class Body(Strict):
@@ -235,15 +287,16 @@ class Body(Strict):
     @model_validator(mode="after")
     def _check(self):
         dims = 3 if self.type == "jelly" else 2
-        if self.type in ("cloth", "jelly"):
-            if len(self.resolution) != dims:
-                raise ValueError(f"resolution: {self.type} needs {dims} numbers, got {self.resolution}")
-            if len(self.size) != dims:
-                raise ValueError(f"size: {self.type} needs {dims} numbers, got {self.size}")
-        if math.fsum(c * c for c in self.direction) < 1e-12:
-            raise ValueError(f"direction: must not be zero, got {self.direction}")
-        _check_path(self.pin_path)
-        return self
+        grid = self.type in ("cloth", "jelly")
+        return _report(self, [
+            ("resolution", f"{self.type} needs {dims} numbers, got {self.resolution}"
+             if grid and len(self.resolution) != dims else None),
+            ("size", f"{self.type} needs {dims} numbers, got {self.size}"
+             if grid and len(self.size) != dims else None),
+            ("direction", f"must not be zero, got {self.direction}"
+             if math.fsum(c * c for c in self.direction) < 1e-12 else None),
+            ("pin_path", _check_path(self.pin_path)),
+        ])
 
 
 class Camera(Strict):
@@ -283,6 +336,7 @@ class Render(Strict):
 
 class Scene(Strict):
     name: str = ""
+    output: Optional[str] = None  # folder under renders/ (default: name); --out overrides
     seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
     fps: Annotated[float, Field(ge=1, le=1000)] = 30.0
     duration: Optional[Annotated[float, Field(gt=0, le=3600)]] = None
@@ -295,30 +349,48 @@ class Scene(Strict):
     bodies: Annotated[List[Body], Field(max_length=32)] = []
     colliders: Annotated[List[Collider], Field(max_length=64)] = []
 
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v):
+        return _check_name(v)
+
+    @field_validator("output")
+    @classmethod
+    def _output(cls, v):
+        return _check_output(v)
+
     @model_validator(mode="after")
     def _check(self):
-        if self.duration is not None and self.frames is not None:
-            raise ValueError("frames: give either duration or frames, not both")
-        if not self.emitters and not self.bodies:
-            raise ValueError("emitters: a scene needs at least one emitter or one body")
+        problems = [("frames", "give either duration or frames, not both"
+                     if self.duration is not None and self.frames is not None else None),
+                    ("emitters", "a scene needs at least one emitter or one body"
+                     if not self.emitters and not self.bodies else None)]
         names = [e.name for e in self.emitters]
         targets = set()
         for i, em in enumerate(self.emitters):
             for j, sub in enumerate(em.sub_emitters):
+                key = ("emitters", i, "sub_emitters", j, "emitter")
                 if sub.emitter not in names:
-                    raise ValueError(f"emitters[{i}].sub_emitters[{j}].emitter: {sub.emitter!r} names no "
-                                     f"emitter (names: {', '.join(repr(n) for n in names if n) or 'none'})")
-                if sub.emitter == em.name:
-                    raise ValueError(f"emitters[{i}].sub_emitters[{j}].emitter: an emitter cannot feed itself")
+                    known = ", ".join(repr(n) for n in names if n) or "none"
+                    problems.append((key, f"{sub.emitter!r} names no emitter (names: {known})"))
+                elif sub.emitter == em.name:
+                    problems.append((key, "an emitter cannot feed itself"))
                 targets.add(sub.emitter)
         for i, em in enumerate(self.emitters):
             if em.rate == 0 and not em.bursts and em.name not in targets:
-                raise ValueError(f"emitters[{i}].rate: an emitter needs a rate > 0, a burst, or to be "
-                                 f"another emitter's sub-emitter")
-        dup = {n for n in names if n and names.count(n) > 1}
-        if dup:
-            raise ValueError(f"emitters: names must be unique, repeated: {', '.join(sorted(dup))}")
-        return self
+                problems.append((("emitters", i, "rate"), "an emitter needs a rate > 0, a burst, or "
+                                 "to be another emitter's sub-emitter"))
+        dup = sorted({n for n in names if n and names.count(n) > 1})
+        problems.append(("emitters", f"names must be unique, repeated: {', '.join(dup)}" if dup else None))
+        if any(p[1] for p in problems):
+            return _report(self, problems)
+        slots = pool_sizes(self.emitters, 1.0 / self.fps)
+        if sum(slots) > MAX_POOL:
+            e = max(range(len(slots)), key=slots.__getitem__)
+            problems.append(("emitters", f"the pool would need {sum(slots):,} particle slots "
+                             f"(emitters[{e}] alone {slots[e]:,}: rate × lifetime + bursts); at most "
+                             f"{MAX_POOL:,}: lower rate or lifetime, or set an emitter's capacity"))
+        return _report(self, problems)
 
     @property
     def frame_count(self) -> int:

@@ -12,26 +12,12 @@ slots) and needs no Python per-particle loop.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import List
 
 import taichi as ti
 
-
-def emitter_capacity(em, frame_dt: float) -> int:
-    """Slots emitter ``em`` (a config Emitter) can fill: rate × max lifetime (over its emission
-    window) plus the burst particles that can be alive together, plus one frame of slack."""
-    if em.capacity is not None:
-        return int(em.capacity)
-    life = em.lifetime
-    window = math.inf if em.stop is None else max(0.0, em.stop - em.start)
-    cont = em.rate * min(life + frame_dt, window + frame_dt) if em.rate > 0 else 0.0
-    burst = 0
-    for b in em.bursts:
-        overlapping = 1 if b.cycles == 1 else min(b.cycles, math.ceil(life / b.interval) + 1)
-        burst += b.count * overlapping
-    return int(math.ceil(cont)) + burst + 8
+from .capacity import emitter_capacity, pool_sizes  # noqa: F401  (re-exported)
 
 
 @dataclass
@@ -47,18 +33,7 @@ class PoolLayout:
 
     @classmethod
     def for_emitters(cls, emitters, frame_dt: float) -> "PoolLayout":
-        sizes = [emitter_capacity(em, frame_dt) for em in emitters]
-        names = {em.name: k for k, em in enumerate(emitters) if em.name}
-        for em in emitters:  # children: parents' events per second × count × child lifetime
-            births = em.rate
-            burst_total = sum(b.count * b.cycles for b in em.bursts)
-            for sub in em.sub_emitters:
-                c = names[sub.emitter]
-                if emitters[c].capacity is not None:
-                    continue
-                per_event = sub.count * (2 if sub.event == "collision" else 1)
-                life = emitters[c].lifetime + frame_dt
-                sizes[c] += int(math.ceil((births * life + burst_total) * per_event))
+        sizes = pool_sizes(emitters, frame_dt)
         starts, acc = [], 0
         for s in sizes:
             starts.append(acc)
