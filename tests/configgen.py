@@ -44,13 +44,14 @@ B0, P1 = E1 + ("bursts", 0), E1 + ("path", 1)
 
 # Every table and the keys it may hold (the schema's documented keys).
 TABLES = {
-    (): "name output seed fps duration frames camera solver forces render emitters colliders",
+    (): "name output seed fps duration frames camera solver forces render emitters bodies colliders",
     ("camera",): "position look_at fov",
     ("solver",): "integrator h adaptive tolerance atol max_steps_per_frame",
-    ("forces",): "gravity drag wind",
-    ("render",): "width height exposure background grid show_colliders",
+    ("forces",): "gravity drag wind turbulence attractors vortices",
+    ("render",): "width height exposure background grid show_colliders density_shading",
     E0: "name effect shape position path radius box_size surface direction spread speed "
-        "inherit_velocity rate bursts start stop lifetime lifetime_randomness drag capacity blend "
+        "inherit_velocity rate bursts start stop lifetime lifetime_randomness drag gravity_scale "
+        "buoyancy cooling turbulence sub_emitters capacity blend "
         "color alpha size size_randomness streak",
     B0: "time count cycles interval",
     P1: "time position",
@@ -233,7 +234,6 @@ def bad_enum(draw):
 @st.composite
 def structural(draw):
     return draw(st.sampled_from([
-        _one(("emitters",), []),
         _one(C0 + ("type",), "cube", claims=C0),
         _one(C1 + ("type",), DELETE, claims=C1),
         _one(B0 + ("count",), DELETE),
@@ -255,7 +255,8 @@ def bad_path_or_name(draw):
 CHECKS = [  # cross-key problems: each reported by its table's check, at its key
     Mutation(((E0 + ("start",), 3.0),), "emitters[0].stop", scope=E0),
     Mutation(((E0 + ("speed",), [2.0, 1.0]),), "emitters[0].speed", scope=E0),
-    Mutation(((E0 + ("rate",), 0.0),), "emitters[0].rate", scope=E0),
+    Mutation(((E0 + ("rate",), 0.0),), "emitters[0].rate", scope=()),
+    Mutation(((("emitters",), []),), "emitters", scope=()),  # no emitter and no body
     Mutation(((E1 + ("direction",), [0.0, 0.0, 0.0]),), "emitters[1].direction", scope=E1),
     Mutation(((E1 + ("color",), [[0.5, 1.0, 1.0, 1.0], [0.2, 1.0, 1.0, 1.0]]),), "emitters[1].color",
              scope=E1),
