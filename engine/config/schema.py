@@ -382,8 +382,6 @@ class Scene(Strict):
                                  "to be another emitter's sub-emitter"))
         dup = sorted({n for n in names if n and names.count(n) > 1})
         problems.append(("emitters", f"names must be unique, repeated: {', '.join(dup)}" if dup else None))
-        if any(p[1] for p in problems):
-            return _report(self, problems)
         slots = pool_sizes(self.emitters, 1.0 / self.fps)
         if sum(slots) > MAX_POOL:
             e = max(range(len(slots)), key=slots.__getitem__)
