@@ -48,7 +48,10 @@ class Scene:
     """Everything one config needs, built once. ``advance_frame()`` steps to the next frame time;
     ``render()`` draws the current state."""
 
-    def __init__(self, cfg, *, width=None, height=None, render=True):
+    def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, bodies=None):
+        """``contacts``: record up to this many particle–collider contacts per step batch (0: the
+        contact code is not compiled). ``bodies``: already-built Body objects to reuse by index
+        (a rebuilt scene keeps its soft bodies without recompiling them)."""
         runtime.ensure_init()
         self.cfg = cfg
         self.t = 0.0
@@ -57,21 +60,34 @@ class Scene:
         self.stats = Stats()
         specs = collider_specs(cfg.colliders)
         self.colliders = Colliders(specs)
-        self.particles = ParticleSystem(cfg, self.colliders, self.stats) if cfg.emitters else None
+        self.particles = (ParticleSystem(cfg, self.colliders, self.stats, contacts)
+                          if cfg.emitters else None)
         self.bodies = []
         if cfg.bodies:
             from .bodies import Body
 
-            for b in cfg.bodies:
-                self.bodies.append(Body(b, specs, cfg.forces.gravity, cfg.solver.integrator))
+            reuse = list(bodies or [])
+            for k, b in enumerate(cfg.bodies):
+                self.bodies.append(reuse[k] if k < len(reuse) and reuse[k] is not None
+                                   else Body(b, specs, cfg.forces.gravity, cfg.solver.integrator))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
-        self.renderer = None
-        if render:
-            from .render.raster import Renderer
+        self._renderers = {}
+        self.renderer = self.renderer_for(width, height) if render else None
 
+    def renderer_for(self, width=None, height=None, show_colliders=None):
+        """The renderer for an image size (built, and compiled, once per size)."""
+        from .render.raster import Renderer
+
+        W = int(width or self.cfg.render.width)
+        H = int(height or self.cfg.render.height)
+        show = self.cfg.render.show_colliders if show_colliders is None else bool(show_colliders)
+        key = (W, H, show)
+        if key not in self._renderers:
             p = self.particles
-            self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
-                                     width, height, bodies=self.bodies)
+            rcfg = self.cfg.render.model_copy(update={"show_colliders": show})
+            self._renderers[key] = Renderer(p.state if p else None, self.cfg.emitters, self.colliders,
+                                            rcfg, W, H, bodies=self.bodies)
+        return self._renderers[key]
 
     # -- stepping -----------------------------------------------------------------------------
     def advance(self, dt: float) -> None:
@@ -98,8 +114,12 @@ class Scene:
             self.stats.alive = alive
             self.stats.peak_alive = max(self.stats.peak_alive, alive)
 
-    def render(self) -> np.ndarray:
-        return self.renderer.render(self.camera)
+    def render(self, width=None, height=None, camera=None, show_colliders=None) -> np.ndarray:
+        """(H, W, 3) uint8 sRGB image of the current state."""
+        r = self.renderer if (width is None and height is None and show_colliders is None
+                              and self.renderer is not None) else \
+            self.renderer_for(width, height, show_colliders)
+        return r.render(camera or self.camera)
 
     # -- read-back ----------------------------------------------------------------------------
     @property

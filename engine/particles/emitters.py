@@ -101,8 +101,9 @@ class Emitters:
         self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
                        s.count, s.min_speed)
                       for p, c in enumerate(self.configs) for s in c.sub_emitters]
-        self.positions = [np.asarray(sample_path(c.path, 0.0, c.position), np.float64)
-                          for c in self.configs]
+        self.positions = [np.asarray(sample_path([(k.time, k.position) for k in c.path], 0.0, c.position),
+                                     np.float64) for c in self.configs]
+        self.runtime_paths = {}
         self._spawn = None
 
     @property
@@ -110,8 +111,18 @@ class Emitters:
         return bool(self.links)
 
     def position_at(self, e: int, t: float) -> np.ndarray:
-        c = self.configs[e]
-        return np.asarray(sample_path(c.path, t, c.position), np.float64) if c.path else self.positions[e]
+        path = self.runtime_paths.get(e) or self.configs[e].path
+        if not path:
+            return self.positions[e]
+        if isinstance(path[0], tuple):
+            return np.asarray(sample_path(path, t, self.positions[e]), np.float64)
+        return np.asarray(sample_path([(k.time, k.position) for k in path], t, self.positions[e]), np.float64)
+
+    def set_target(self, e: int, t_now: float, t_next: float, position) -> None:
+        """Control: emitter e moves linearly to ``position`` by ``t_next``; particles inherit the
+        inferred velocity (``inherit_velocity``) and are spread along the motion."""
+        here = tuple(float(c) for c in self.position_at(e, t_now))
+        self.runtime_paths[e] = [(t_now, here), (max(t_next, t_now + 1e-9), tuple(float(c) for c in position))]
 
     def build(self):
         """Compile the spawn kernels. A particle born at t_s inside the step [t0, t1) about to be

@@ -21,7 +21,10 @@ def _pack(x, v):
 
 class ParticleIntegrator:
     def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False,
-                 events: bool = False):
+                 events: bool = False, contacts: int = 0):
+        """``collide`` is the colliders' function (None: no colliders); with ``contacts`` > 0 it
+        must be the reporting variant, and up to that many contacts per frame are recorded in
+        ``contact_*`` fields (slot, collider, position, normal, impact speed, time)."""
         S = state
         pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
                                       S.particle_life, S.particle_alive)
@@ -32,6 +35,17 @@ class ParticleIntegrator:
         self.nonfinite_t[None] = NO_FAILURE
         bad_t, err, hits = self.nonfinite_t, self.err, self.hits
         has_colliders = collide is not None
+        record = bool(contacts) and has_colliders
+        self.max_contacts = int(contacts)
+        self.contact_count = ti.field(ti.i32, shape=())
+        cn = max(1, int(contacts))
+        self.contact_slot = c_slot = ti.field(ti.i32, shape=cn)
+        self.contact_collider = c_coll = ti.field(ti.i32, shape=cn)
+        self.contact_pos = c_pos = ti.Vector.field(3, ti.f32, shape=cn)
+        self.contact_normal = c_nrm = ti.Vector.field(3, ti.f32, shape=cn)
+        self.contact_speed = c_spd = ti.field(ti.f32, shape=cn)
+        self.contact_time = c_t = ti.field(ti.f32, shape=cn)
+        c_count, c_max = self.contact_count, int(contacts)
         event = impact = None
         if events:
             event, impact = S.particle_event, S.particle_impact
@@ -51,7 +65,21 @@ class ParticleIntegrator:
             """Collide, age and retire one particle after an accepted step."""
             if is_finite(x.sum() + v.sum()):
                 killed = 0
-                if ti.static(has_colliders):
+                if ti.static(record):
+                    nx, nv, k, nh, which, nrm, spd = collide(x, v)
+                    if nh > 0:
+                        c = ti.atomic_add(c_count[None], 1)  # order fixed later by (time, slot)
+                        if c < c_max:
+                            c_slot[c], c_coll[c], c_pos[c] = i, which, nx
+                            c_nrm[c], c_spd[c], c_t[c] = nrm, spd, t_end
+                    if ti.static(events):
+                        if nh > 0:
+                            event[i] |= 2
+                            impact[i] = (nv - v).norm()
+                    x, v, killed = nx, nv, k
+                    if nh > 0:
+                        ti.atomic_add(hits[None], nh)
+                elif ti.static(has_colliders):
                     nx, nv, k, nh = collide(x, v)
                     if ti.static(events):
                         if nh > 0:

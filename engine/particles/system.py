@@ -22,7 +22,7 @@ class DivergenceError(RuntimeError):
 
 
 class ParticleSystem:
-    def __init__(self, cfg, colliders, stats):
+    def __init__(self, cfg, colliders, stats, contacts: int = 0):
         self.cfg = cfg
         sol = cfg.solver
         self.method, self.adaptive, self.stats = sol.integrator, sol.adaptive, stats
@@ -32,11 +32,11 @@ class ParticleSystem:
         self.emitters.state = self.state
         self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag)
         self.colliders = colliders
-        self._moving_colliders = any(s.path for s in colliders.specs)
-        collide = colliders.make_func() if colliders.count else None
+        self.moving_colliders = any(s.path for s in colliders.specs)
+        collide = colliders.make_func(report=bool(contacts)) if colliders.count else None
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
                                              self.method, self.adaptive,
-                                             events=self.emitters.uses_events)
+                                             events=self.emitters.uses_events, contacts=contacts)
         self.emitters.build()
         self.h_last = sol.h
         if self.adaptive:
@@ -46,7 +46,7 @@ class ParticleSystem:
 
     def _step_fixed(self, t, h):
         self.emitters.emit(t, h)
-        if self._moving_colliders:
+        if self.moving_colliders:
             self.colliders.move_to(t + h)
         self.integrator.step_fixed(t, h)
         self.emitters.emit_children()
@@ -64,7 +64,7 @@ class ParticleSystem:
                     f"solver.max_steps_per_frame")
             h, lands = clip_to_target(t, self._h_try, t_target)
             self.emitters.emit(t, h)  # newborns wait (negative age) if the step is retried shorter
-            if self._moving_colliders:
+            if self.moving_colliders:
                 self.colliders.move_to(t + h)
             err = self.integrator.attempt(t, h, self._atol, sol.tolerance)
             ok, h_new = self.controller.propose(h, err)
