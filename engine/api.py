@@ -141,9 +141,17 @@ class ParticleScene:
             raise ValueError(f"rate: must be >= 0, got {rate}")
         self.scene.particles.emitters.clocks[self._emitter(name)].rate = float(rate)
 
-    def burst(self, name: str, count: int) -> None:
-        """Emit ``count`` particles from ``name`` at the start of the next step."""
-        self.scene.particles.emitters.burst(self._emitter(name), int(count))
+    def set_emitting(self, name: str, on: bool) -> None:
+        """Start or stop an emitter's continuous emission (bursts from code still work)."""
+        self.scene.particles.emitters.clocks[self._emitter(name)].enabled = bool(on)
+
+    def burst(self, name: str, count: int, position=None) -> None:
+        """Emit ``count`` particles from ``name`` at the start of the next step; with ``position``
+        the emitter is first placed there (a jump, not a motion: nothing is inherited)."""
+        em, e = self.scene.particles.emitters, self._emitter(name)
+        if position is not None:
+            em.runtime_paths[e] = [(self.time, tuple(float(c) for c in position))]
+        em.burst(e, int(count))
 
     def move_collider(self, name: str, position, over: float | None = None) -> None:
         """Move collider ``name`` (a plane's point or a sphere's centre) to ``position`` by the end

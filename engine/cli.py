@@ -113,6 +113,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="workprec, stability, energy, or one problem (kepler, lotka-volterra, ...)")
     c.set_defaults(func=_cmd_chart)
 
+    w = sub.add_parser("view", help="play a config in a window (mouse orbits, space pauses)")
+    w.add_argument("config")
+    w.add_argument("--frames", type=int, default=None, help="close after this many frames")
+    w.add_argument("--screenshot", default=None, help="save the last frame shown to this PNG")
+    w.set_defaults(func=lambda a: __import__("engine.viewer", fromlist=["x"]).cmd_view(a))
+
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
     g.add_argument("--out", default=os.path.join("renders", "gallery"))
     g.add_argument("--configs", default="configs")

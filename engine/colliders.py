@@ -154,7 +154,7 @@ class Colliders:
 
         @ti.func
         def collide4(x, v):
-            x2, v2, killed, hits, _, _, _ = collide(x, v)
+            x2, v2, killed, hits, _which, _normal, _speed = collide(x, v)
             return x2, v2, killed, hits
 
         return collide if report else collide4

@@ -51,7 +51,7 @@ TABLES = {
     ("render",): "width height exposure background grid show_colliders density_shading",
     E0: "name effect shape position path radius box_size surface direction spread speed "
         "inherit_velocity rate bursts start stop lifetime lifetime_randomness drag gravity_scale "
-        "buoyancy cooling turbulence sub_emitters capacity blend "
+        "buoyancy cooling turbulence sub_emitters emitting capacity blend "
         "color alpha size size_randomness streak",
     B0: "time count cycles interval",
     P1: "time position",

@@ -141,6 +141,8 @@ class Emitter(Strict):
     speed: Annotated[List[NonNeg], Field(min_length=2, max_length=2)] = [1.0, 1.0]  # [min, max] m/s
     inherit_velocity: Annotated[float, Field(ge=-10, le=10)] = 0.0
     rate: Annotated[float, Field(ge=0, le=1e8)] = 0.0  # particles per second
+    emitting: bool = True  # Godot's name: false = silent until code starts it or calls burst()
+    # (such an emitter gets at least 1024 pool slots unless `capacity` says otherwise)
     bursts: List[Burst] = []
     start: NonNeg = 0.0  # emission window, seconds
     stop: Optional[NonNeg] = None
@@ -377,9 +379,10 @@ class Scene(Strict):
                     problems.append((key, "an emitter cannot feed itself"))
                 targets.add(sub.emitter)
         for i, em in enumerate(self.emitters):
-            if em.rate == 0 and not em.bursts and em.name not in targets:
-                problems.append((("emitters", i, "rate"), "an emitter needs a rate > 0, a burst, or "
-                                 "to be another emitter's sub-emitter"))
+            if em.rate == 0 and not em.bursts and em.name not in targets and em.emitting:
+                problems.append((("emitters", i, "rate"), "an emitter needs a rate > 0, a burst, "
+                                 "to be another emitter's sub-emitter, or emitting = false (driven "
+                                 "from code)"))
         dup = sorted({n for n in names if n and names.count(n) > 1})
         problems.append(("emitters", f"names must be unique, repeated: {', '.join(dup)}" if dup else None))
         slots = pool_sizes(self.emitters, 1.0 / self.fps)

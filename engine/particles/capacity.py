@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 MAX_POOL = 50_000_000  # slots in one scene's pool (about 2.2 GB of particle state)
+CODE_DRIVEN_SLOTS = 1024  # an emitter with emitting = false bursts from code: room for that
 
 
 def emitter_capacity(em, frame_dt: float) -> int:
@@ -18,7 +19,10 @@ def emitter_capacity(em, frame_dt: float) -> int:
     for b in em.bursts:
         overlapping = 1 if b.cycles == 1 else min(b.cycles, math.ceil(life / b.interval) + 1)
         burst += b.count * overlapping
-    return int(math.ceil(cont)) + burst + 8
+    slots = int(math.ceil(cont)) + burst + 8
+    if not getattr(em, "emitting", True):
+        slots = max(slots, CODE_DRIVEN_SLOTS)
+    return slots
 
 
 def pool_sizes(emitters, frame_dt: float) -> list:

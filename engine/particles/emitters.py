@@ -96,7 +96,7 @@ class Emitters:
             self.emitter_dir[e] = (d / np.linalg.norm(d)).tolist()
             bursts = sorted((b.time + j * b.interval, b.count) for b in c.bursts for j in range(b.cycles))
             self.clocks.append(EmitterClock(c.rate, c.start, math.inf if c.stop is None else c.stop,
-                                            bursts))
+                                            bursts, enabled=c.emitting))
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
         self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
                        s.count, s.min_speed)
