@@ -1,7 +1,8 @@
 """Forces on particles as small ``ti.func`` terms, summed under ``ti.static``.
 
 The set of terms is fixed when the scene is finalised: a term the scene does not use is not
-compiled at all. Each term maps (x, v, t, i) → acceleration (m/s²); parameters a game may change
+compiled at all. Each term maps (x, v, age, t, i) → acceleration (m/s²), with the particle's age at the
+stage time (it is part of the integrated state); parameters a game may change
 at run time (gravity, wind) live in 0-d fields, so changing them recompiles nothing.
 """
 from __future__ import annotations
@@ -74,18 +75,18 @@ class Forces:
                                   ("vortices", self.vortex_count > 0)) if used]
 
     def make_accel(self):
-        """``accel(x, v, t, i)``: the sum of the scene's terms for particle slot i."""
+        """``accel(x, v, age, t, i)``: the sum of the scene's terms for particle slot i."""
         g, wind, kdrag = self.force_gravity, self.force_wind, self.force_drag
         pem, edrag = self._state.particle_emitter, self._emitter_drag
 
         gscale = self.emitter_gravity_scale
 
         @ti.func
-        def gravity(x, v, t, i):
+        def gravity(x, v, age, t, i):
             return g[None] * gscale[pem[i]]
 
         @ti.func
-        def drag(x, v, t, i):
+        def drag(x, v, age, t, i):
             k = edrag[pem[i]]
             if k < 0.0:
                 k = kdrag[None]
@@ -94,13 +95,13 @@ class Forces:
         available = {"gravity": gravity, "drag": drag}
         S = self._state
         if self.use_buoyancy:
-            bu, inv_cool, age = self.emitter_buoyancy, self.emitter_inv_cooling, S.particle_age
+            bu, inv_cool = self.emitter_buoyancy, self.emitter_inv_cooling
 
             @ti.func
-            def buoyancy(x, v, t, i):
+            def buoyancy(x, v, age, t, i):
                 # hot gas rises; its temperature excess decays as exp(−age/cooling) (Newton cooling)
                 e = pem[i]
-                return ti.Vector([0.0, bu[e] * ti.exp(-age[i] * inv_cool[e]), 0.0])
+                return ti.Vector([0.0, bu[e] * ti.exp(-age * inv_cool[e]), 0.0])
 
             available["buoyancy"] = buoyancy
         if self.use_turbulence:
@@ -108,7 +109,7 @@ class Forces:
             strength, freq, scroll, octaves = tb.strength, tb.frequency, tb.scroll, tb.octaves
 
             @ti.func
-            def turbulence(x, v, t, i):
+            def turbulence(x, v, age, t, i):
                 p = x * freq - ti.Vector([0.0, scroll * freq * t, 0.0])
                 return (strength * et[pem[i]]) * curl_noise(p, octaves)
 
@@ -118,7 +119,7 @@ class Forces:
                                     self.attractor_count)
 
             @ti.func
-            def attractors(x, v, t, i):
+            def attractors(x, v, age, t, i):
                 a = ti.Vector([0.0, 0.0, 0.0])
                 for k in ti.static(range(na)):
                     d = apos[k] - x
@@ -132,7 +133,7 @@ class Forces:
                                          self.vortex_radius, self.vortex_count)
 
             @ti.func
-            def vortices(x, v, t, i):
+            def vortices(x, v, age, t, i):
                 a = ti.Vector([0.0, 0.0, 0.0])
                 for k in ti.static(range(nv)):
                     d = x - vpos[k]
@@ -146,10 +147,10 @@ class Forces:
         terms = tuple(available[n] for n in self.names)
 
         @ti.func
-        def accel(x, v, t, i):
+        def accel(x, v, age, t, i):
             a = ti.Vector([0.0, 0.0, 0.0])
             for k in ti.static(range(len(terms))):
-                a += terms[k](x, v, t, i)
+                a += terms[k](x, v, age, t, i)
             return a
 
         return accel

@@ -1,6 +1,6 @@
 """Particle stepping: the ODE core's steppers fused into one kernel per step.
 
-Each particle's state is y = (x, v) ∈ R⁶ with y' = (v, a(x, v, t)); the particles do not interact,
+Each particle's state is y = (x, age, v, 0) ∈ R⁸ with y' = (v, 1, a(x, v, age, t), 0); the particles do not interact,
 so all stages of a method run in registers inside one parallel loop (PERF-NOTES: one fused RK4
 kernel is ~3× faster than stage kernels). Colliders and ageing run in the same kernel after the
 step. With step doubling, ``attempt`` writes a candidate and returns the max-norm error over live
@@ -15,8 +15,20 @@ NO_FAILURE = 1e30  # sentinel in nonfinite_t: no particle went non-finite (f32 i
 
 
 @ti.func
-def _pack(x, v):
-    return ti.Vector([x[0], x[1], x[2], v[0], v[1], v[2]])
+def _pack(x, age, v):
+    """The ODE state of one particle: q = (x, age), p = (v, 0) — age is integrated (age' = 1)
+    so age-dependent forces (buoyancy cooling) see the age at each stage, not the step's start."""
+    return ti.Vector([x[0], x[1], x[2], age, v[0], v[1], v[2], 0.0])
+
+
+@ti.func
+def _x(y):
+    return ti.Vector([y[0], y[1], y[2]])
+
+
+@ti.func
+def _v(y):
+    return ti.Vector([y[4], y[5], y[6]])
 
 
 class ParticleIntegrator:
@@ -52,13 +64,12 @@ class ParticleIntegrator:
 
         @ti.func
         def deriv(y, t, i):
-            x = ti.Vector([y[0], y[1], y[2]])
-            v = ti.Vector([y[3], y[4], y[5]])
-            return _pack(v, accel(x, v, t, i))
+            v = _v(y)
+            return _pack(v, 1.0, accel(_x(y), v, y[3], t, i))
 
         @ti.func
-        def deriv_q(y, t, i):  # x' = v: all the drift of a partitioned method needs
-            return _pack(ti.Vector([y[3], y[4], y[5]]), ti.Vector([0.0, 0.0, 0.0]))
+        def deriv_q(y, t, i):  # (x, age)' = (v, 1): all the drift of a partitioned method needs
+            return _pack(_v(y), 1.0, ti.Vector([0.0, 0.0, 0.0]))
 
         @ti.func
         def finish(i, x, v, t_end, h):
@@ -100,7 +111,7 @@ class ParticleIntegrator:
                 ti.atomic_min(bad_t[None], t_end)
                 alive[i] = 0
 
-        step = make_step(method, deriv, 6, ti.f32, fq=deriv_q)
+        step = make_step(method, deriv, 8, ti.f32, fq=deriv_q)
 
         @ti.kernel
         def step_fixed(t: ti.f32, h: ti.f32):
@@ -108,9 +119,8 @@ class ParticleIntegrator:
                 if alive[i] != 0:
                     a0 = ti.min(age[i], 0.0)  # < 0: born a0 seconds into this step
                     if -a0 < h:
-                        y = step(_pack(pos[i], vel[i]), t - a0, h + a0, i)
-                        finish(i, ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[3], y[4], y[5]]),
-                               t + h, h)
+                        y = step(_pack(pos[i], ti.max(age[i], 0.0), vel[i]), t - a0, h + a0, i)
+                        finish(i, _x(y), _v(y), t + h, h)
                     else:
                         age[i] += h  # not born yet
 
@@ -118,7 +128,7 @@ class ParticleIntegrator:
 
         if adaptive:
             cpos, cvel = S.cand_pos, S.cand_vel
-            dstep = doubling_step(method, deriv, 6, ti.f32, extrapolate, fq=deriv_q)
+            dstep = doubling_step(method, deriv, 8, ti.f32, extrapolate, fq=deriv_q)
 
             @ti.kernel
             def attempt(t: ti.f32, h: ti.f32, atol: ti.f32, rtol: ti.f32) -> ti.f32:
@@ -127,10 +137,10 @@ class ParticleIntegrator:
                     if alive[i] != 0:
                         a0 = ti.min(age[i], 0.0)
                         if -a0 < h:
-                            y0 = _pack(pos[i], vel[i])
+                            y0 = _pack(pos[i], ti.max(age[i], 0.0), vel[i])
                             y2, est = dstep(y0, t - a0, h + a0, i)
-                            cpos[i] = ti.Vector([y2[0], y2[1], y2[2]])
-                            cvel[i] = ti.Vector([y2[3], y2[4], y2[5]])
+                            cpos[i] = _x(y2)
+                            cvel[i] = _v(y2)
                             ti.atomic_max(err[None], scaled_error(y0, y2, est, atol, rtol))
                         else:
                             cpos[i] = pos[i]
