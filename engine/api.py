@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import load_config
+from .particles.pool import PARTICLE_FIELDS
 from .render.camera import Camera
 from .scene import Scene
 
@@ -278,44 +279,41 @@ class ParticleScene:
             _carry_particles(old.particles, scene.particles)
         self.scene, self.cfg, self._data = scene, new_cfg, data
 
-    def add_emitter(self, emitter: dict) -> None:
+    def _add(self, key: str, item: dict) -> None:
         data = self._data_now()
-        data.setdefault("emitters", []).append(dict(emitter))
+        data.setdefault(key, []).append(dict(item))
         self._rebuild(data)
+
+    def _remove(self, key: str, name: str) -> None:
+        data = self._data_now()
+        data[key] = [x for x in data.get(key, []) if x.get("name") != name]
+        self._rebuild(data)
+
+    def add_emitter(self, emitter: dict) -> None:
+        self._add("emitters", emitter)
 
     def remove_emitter(self, name: str) -> None:
-        data = self._data_now()
-        self._emitter(name)
-        data["emitters"] = [e for e in data.get("emitters", []) if e.get("name") != name]
-        self._rebuild(data)
+        self._emitter(name)  # a clear KeyError for an unknown name
+        self._remove("emitters", name)
 
     def add_collider(self, collider: dict) -> None:
-        data = self._data_now()
-        data.setdefault("colliders", []).append(dict(collider))
-        self._rebuild(data)
+        self._add("colliders", collider)
 
     def remove_collider(self, name: str) -> None:
-        data = self._data_now()
         self.scene.colliders.index(name)
-        data["colliders"] = [c for c in data.get("colliders", []) if c.get("name") != name]
-        self._rebuild(data)
+        self._remove("colliders", name)
 
     def add_body(self, body: dict) -> None:
-        data = self._data_now()
-        data.setdefault("bodies", []).append(dict(body))
-        self._rebuild(data)
+        self._add("bodies", body)
 
     def remove_body(self, name: str) -> None:
-        data = self._data_now()
         self._body(name)
-        data["bodies"] = [b for b in data.get("bodies", []) if b.get("name") != name]
-        self._rebuild(data)
+        self._remove("bodies", name)
 
 
 def _carry_particles(old, new) -> None:
     """Copy each named emitter's ring (particles, head, serial, clock) into the rebuilt pool."""
-    fields = ("particle_pos", "particle_vel", "particle_age", "particle_life", "particle_alive",
-              "particle_emitter", "particle_rand")
+    fields = PARTICLE_FIELDS
     src = {f: getattr(old.state, f).to_numpy() for f in fields}
     dst = {f: getattr(new.state, f).to_numpy() for f in fields}
     old_names = [c.name for c in old.emitters.configs]

@@ -159,12 +159,19 @@ def cmd_run(args) -> int:
                       f"continue with --resume", stop.signum)
     sim_fps = st.frames / max(time.perf_counter() - t_built, 1e-9)
     dropped = scene.dropped()
+    parts = []
+    if scene.particles is not None:
+        parts.append(f"{st.steps} steps ({st.rejected} rejected), {cfg.solver.integrator}"
+                     f"{' adaptive' if cfg.solver.adaptive else ''}; peak live particles "
+                     f"{st.peak_alive:,} of {scene.capacity:,}; dropped {dropped:,}")
+    for b in scene.bodies:
+        sysm = b.system
+        parts.append(f"{b.cfg.type} {b.cfg.name or ''}: {b.topology.node_count:,} nodes, "
+                     f"{b.topology.spring_count:,} springs, {sysm.integrator} × "
+                     f"{sysm.substeps_for(scene.frame_dt)} substeps/frame")
     print(f"{cfg.name}: {st.frames} frames ({args.format}) in {out_dir}"
-          f"{f' (resumed at frame {first})' if first else ''}; {st.steps} steps"
-          f" ({st.rejected} rejected), {cfg.solver.integrator}"
-          f"{' adaptive' if cfg.solver.adaptive else ''}; peak live particles {st.peak_alive:,}"
-          f" of {scene.capacity:,}; dropped {dropped:,}; {wall:.2f} s wall"
-          f" ({sim_fps:.1f} frames/s after {t_built - t_start:.2f} s build)")
+          f"{f' (resumed at frame {first})' if first else ''}; " + "; ".join(parts)
+          + f"; {wall:.2f} s wall ({sim_fps:.1f} frames/s after {t_built - t_start:.2f} s build)")
     if dropped:
         print(f"warning: {dropped:,} particles did not fit their emitters' pools "
               f"(raise the emitter's capacity)", file=sys.stderr)

@@ -10,6 +10,7 @@ from PIL import Image
 from engine.config import load_config
 from engine.particles.curves import Curves
 from engine.particles.noise import curl_noise
+from engine.particles.pool import PARTICLE_FIELDS
 from engine.scene import Scene
 from helpers import scene_dict
 
@@ -94,8 +95,7 @@ def _render_with_pool_order(d, perm=None):
     if perm is not None:
         S, cap = s.particles.state, s.capacity
         order = perm(cap)  # one permutation for every field
-        for f in ("particle_pos", "particle_vel", "particle_age", "particle_life", "particle_alive",
-                  "particle_emitter", "particle_rand"):
+        for f in PARTICLE_FIELDS:
             a = getattr(S, f).to_numpy()
             a[:cap] = a[:cap][order]
             getattr(S, f).from_numpy(a)

@@ -21,6 +21,19 @@ import taichi as ti
 from .tableau import TABLEAUS, ButcherTableau
 
 
+def _with_first_eval(_step, f, with_k1: bool):
+    """``_step(y, t, h, i, d1)`` takes f(y, t) precomputed (step doubling shares it between the
+    full step and the first half step); the plain stepper evaluates it itself."""
+    if with_k1:
+        return _step
+
+    @ti.func
+    def step(y, t, h, i):
+        return _step(y, t, h, i, f(y, t, i))
+
+    return step
+
+
 def rk_step(tab: ButcherTableau, f: Callable, dtype, with_k1: bool = False):
     """Explicit RK step for ``tab``. With ``with_k1`` the function takes ``f(y, t, i)`` precomputed
     as a fifth argument (step doubling shares it between the full step and the first half step).
@@ -49,14 +62,7 @@ def rk_step(tab: ButcherTableau, f: Callable, dtype, with_k1: bool = False):
                 out = out + (h * ti.cast(B[j][0], dtype) / ti.cast(B[j][1], dtype)) * ks[j]
         return out
 
-    if with_k1:
-        return _step
-
-    @ti.func
-    def step(y, t, h, i):
-        return _step(y, t, h, i, f(y, t, i))
-
-    return step
+    return _with_first_eval(_step, f, with_k1)
 
 
 def _half_masks(n: int, dtype):
@@ -82,14 +88,7 @@ def symplectic_euler_step(f: Callable, n: int, dtype, with_k1: bool = False, fq=
         y1 = y + h * (Mp * d1)
         return y1 + h * (Mq * fq(y1, t, i))
 
-    if with_k1:
-        return _step
-
-    @ti.func
-    def step(y, t, h, i):
-        return _step(y, t, h, i, f(y, t, i))
-
-    return step
+    return _with_first_eval(_step, f, with_k1)
 
 
 def verlet_step(f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
@@ -112,14 +111,7 @@ def verlet_step(f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
         y2 = y1 + h * (Mq * fq(y1, t + half, i))
         return y2 + half * (Mp * f(y2, t + h, i))
 
-    if with_k1:
-        return _step
-
-    @ti.func
-    def step(y, t, h, i):
-        return _step(y, t, h, i, f(y, t, i))
-
-    return step
+    return _with_first_eval(_step, f, with_k1)
 
 
 @dataclass(frozen=True)

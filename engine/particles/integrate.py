@@ -34,9 +34,10 @@ def _v(y):
 class ParticleIntegrator:
     def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False,
                  events: bool = False, contacts: int = 0):
-        """``collide`` is the colliders' function (None: no colliders); with ``contacts`` > 0 it
-        must be the reporting variant, and up to that many contacts per frame are recorded in
-        ``contact_*`` fields (slot, collider, position, normal, impact speed, time)."""
+        """``collide`` is the colliders' reporting function (``make_func(report=True)``; None: no
+        colliders). With ``contacts`` > 0 up to that many contacts per frame are recorded in
+        ``contact_*`` fields (slot, collider, position, normal, impact speed, time); without, the
+        unused report outputs are dead code the compiler drops."""
         S = state
         pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
                                       S.particle_life, S.particle_alive)
@@ -76,22 +77,14 @@ class ParticleIntegrator:
             """Collide, age and retire one particle after an accepted step."""
             if is_finite(x.sum() + v.sum()):
                 killed = 0
-                if ti.static(record):
+                if ti.static(has_colliders):
                     nx, nv, k, nh, which, nrm, spd = collide(x, v)
-                    if nh > 0:
-                        c = ti.atomic_add(c_count[None], 1)  # order fixed later by (time, slot)
-                        if c < c_max:
-                            c_slot[c], c_coll[c], c_pos[c] = i, which, nx
-                            c_nrm[c], c_spd[c], c_t[c] = nrm, spd, t_end
-                    if ti.static(events):
+                    if ti.static(record):
                         if nh > 0:
-                            event[i] |= 2
-                            impact[i] = (nv - v).norm()
-                    x, v, killed = nx, nv, k
-                    if nh > 0:
-                        ti.atomic_add(hits[None], nh)
-                elif ti.static(has_colliders):
-                    nx, nv, k, nh = collide(x, v)
+                            c = ti.atomic_add(c_count[None], 1)  # order fixed later by (time, slot)
+                            if c < c_max:
+                                c_slot[c], c_coll[c], c_pos[c] = i, which, nx
+                                c_nrm[c], c_spd[c], c_t[c] = nrm, spd, t_end
                     if ti.static(events):
                         if nh > 0:
                             event[i] |= 2

@@ -41,6 +41,11 @@ class PoolLayout:
         return cls(starts, sizes)
 
 
+# the per-slot state every pool has (optional ones are listed in ParticleState's docstring)
+PARTICLE_FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_life", "particle_alive",
+                   "particle_emitter", "particle_rand")
+
+
 class ParticleState:
     """State of every slot, shape (capacity,):
 

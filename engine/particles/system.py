@@ -33,7 +33,7 @@ class ParticleSystem:
         self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag)
         self.colliders = colliders
         self.moving_colliders = any(s.path for s in colliders.specs)
-        collide = colliders.make_func(report=bool(contacts)) if colliders.count else None
+        collide = colliders.make_func(report=True) if colliders.count else None
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
                                              self.method, self.adaptive,
                                              events=self.emitters.uses_events, contacts=contacts)
