@@ -96,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="continue an interrupted PNG run from its last whole frame")
     r.add_argument("--threads", type=int, default=argparse.SUPPRESS,
                    help="CPU threads for Taichi kernels (as before the command)")
+    r.add_argument("--arch", default=argparse.SUPPRESS, choices=["cpu", "cuda", "vulkan", "metal", "gpu"],
+                   help="Taichi backend (as before the command)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=lambda a: _commands().cmd_run(a))
 

@@ -99,6 +99,18 @@ def test_validate_and_list_shipped_configs():
     assert r.returncode == 0 and "sparks.toml" in r.stdout and "dust" in r.stdout
 
 
+def test_mp4_output(tmp_path):
+    out = tmp_path / "m"
+    r = particles("run", "configs/dust.toml", "--frames", "8", "--out", str(out), "--format", "mp4",
+                  "--quiet", "--size", "96x54", "--arch", "cpu")
+    assert r.returncode == 0, r.stderr
+    assert visible(out) == ["dust.mp4"]
+    import imageio.v2 as imageio
+
+    frames = list(imageio.get_reader(str(out / "dust.mp4")))
+    assert len(frames) == 8 and frames[0].shape[:2] == (54, 96)
+
+
 def test_gif_output_is_whole(tmp_path):
     out = tmp_path / "g"
     r = particles("run", "configs/sparks.toml", "--frames", "6", "--out", str(out), "--format", "gif",
