@@ -105,10 +105,12 @@ def test_mp4_output(tmp_path):
                   "--quiet", "--size", "96x54", "--arch", "cpu")
     assert r.returncode == 0, r.stderr
     assert visible(out) == ["dust.mp4"]
-    import imageio.v2 as imageio
+    import imageio_ffmpeg
 
-    frames = list(imageio.get_reader(str(out / "dust.mp4")))
-    assert len(frames) == 8 and frames[0].shape[:2] == (54, 96)
+    reader = imageio_ffmpeg.read_frames(str(out / "dust.mp4"))
+    meta = next(reader)
+    frames = list(reader)
+    assert meta["size"] == (96, 54) and len(frames) == 8
 
 
 def test_gif_output_is_whole(tmp_path):
