@@ -199,13 +199,17 @@ def cmd_list(args) -> int:
     for path in sorted(glob.glob(os.path.join(root, "*.toml"))):
         try:
             cfg = load_config(path)
-            info = f"{len(cfg.emitters)} emitter(s), {len(cfg.colliders)} collider(s), " \
-                   f"{cfg.frame_count} frames at {cfg.fps:g} fps, {cfg.solver.integrator}"
+            what = [f"{len(cfg.emitters)} emitter(s)"] if cfg.emitters else []
+            what += [f"{b.type} ({b.integrator or cfg.solver.integrator})" for b in cfg.bodies]
+            info = f"{', '.join(what)}, {len(cfg.colliders)} collider(s), " \
+                   f"{cfg.frame_count} frames at {cfg.fps:g} fps" + \
+                   (f", {cfg.solver.integrator}" if cfg.emitters else "")
         except ConfigError as e:
             info = f"INVALID: {e.problems[0]}"
         print(f"  {os.path.basename(path):<20} {info}")
     print("effect presets:")
     for name, mod in PRESETS.items():
-        doc = (mod.__doc__ or "").strip().splitlines()[0]
+        doc = " ".join((mod.__doc__ or "").split()).split(": ", 1)[-1]
+        doc = doc if len(doc) <= 72 else doc[:69].rsplit(" ", 1)[0] + " ..."
         print(f"  {name:<20} {doc}")
     return 0
