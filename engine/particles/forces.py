@@ -22,6 +22,9 @@ class Forces:
         self.force_drag[None] = cfg.drag
         self.use_gravity = any(g != 0.0 for g in cfg.gravity)
         self.use_drag = cfg.drag > 0 or any((e.drag or 0.0) > 0 for e in emitter_configs)
+        # Only when some emitter sets its own drag does the kernel read each particle's emitter id
+        # (4 more bytes per particle and a gather); otherwise every particle uses the scene's k.
+        self.per_emitter_drag = any(e.drag is not None for e in emitter_configs)
         self._state, self._emitter_drag = state, emitter_drag
         self.extra_terms = []  # (name, ti.func) added by later features (buoyancy, noise, ...)
 
@@ -34,6 +37,7 @@ class Forces:
         """``accel(x, v, t, i)``: the sum of the scene's terms for particle slot i."""
         g, wind, kdrag = self.force_gravity, self.force_wind, self.force_drag
         pem, edrag = self._state.particle_emitter, self._emitter_drag
+        per_emitter = self.per_emitter_drag
 
         @ti.func
         def gravity(x, v, t, i):
@@ -41,9 +45,11 @@ class Forces:
 
         @ti.func
         def drag(x, v, t, i):
-            k = edrag[pem[i]]
-            if k < 0.0:
-                k = kdrag[None]
+            k = kdrag[None]
+            if ti.static(per_emitter):
+                ke = edrag[pem[i]]
+                if ke >= 0.0:
+                    k = ke
             return -k * (v - wind[None])  # linear drag relative to the air (Stokes regime)
 
         terms = []
