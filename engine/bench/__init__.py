@@ -53,7 +53,7 @@ def header() -> str:
     import taichi as ti
 
     return (f"# particles bench  {time.strftime('%Y-%m-%d %H:%M %Z')}  nproc={os.cpu_count()}  "
-            f"cpu={cpu}  python={platform.python_version()}  taichi={".".join(map(str, ti.__version__))}")
+            f"cpu={cpu}  python={platform.python_version()}  taichi={'.'.join(map(str, ti.__version__))}")
 
 
 def main(quick: bool = False, only=None) -> int:

@@ -151,6 +151,7 @@ class TiledSplat:
 
         @ti.kernel
         def count():
+            ti.loop_config(block_dim=1)  # one chunk per task: the default grain is all 64 at once
             for c in range(CHUNKS):
                 for t in range(T):
                     hist[c, t] = 0
@@ -163,6 +164,7 @@ class TiledSplat:
 
         @ti.kernel
         def offsets():
+            ti.loop_config(block_dim=16)
             for t in range(T):
                 run = 0
                 for c in range(CHUNKS):
@@ -182,6 +184,7 @@ class TiledSplat:
 
         @ti.kernel
         def scatter(pairs: ti.template()):
+            ti.loop_config(block_dim=1)
             for c in range(CHUNKS):
                 for i in range(c * chunk, ti.min(cap, (c + 1) * chunk)):
                     if info[i][0] != 0:
@@ -241,6 +244,8 @@ class TiledSplat:
                 span = ti.max(x1 - x0, y1 - y0)
                 if span < 2:
                     block(2, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf)
+                elif span < 3:
+                    block(3, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf)
                 elif span < 4:
                     block(4, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf)
                 else:
