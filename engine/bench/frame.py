@@ -39,24 +39,35 @@ def scene_config(n: int, streak: float = 0.0) -> dict:
     }
 
 
-def build_scene(n: int, streak: float = 0.0, width: int = W, height: int = H):
+def build_scene(n: int, streak: float = 0.0, width: int = W, height: int = H, config=None):
     from ..config import load_config
     from ..scene import Scene
 
-    scene = Scene(load_config(scene_config(n, streak)), width=width, height=height)
+    scene = Scene(load_config(config or scene_config(n, streak)), width=width, height=height)
+    fill_steady(scene)
+    return scene
+
+
+def fill_steady(scene, seed: int = 3):
+    """Every slot alive, in view, ages spread so each emitter's ring retires in order."""
     S = scene.state
     cap = scene.layout.capacity
-    pos, vel, age, life = initial_state(cap, seed=3)
+    pos, vel, _, _ = initial_state(cap, seed=seed)
+    age = np.empty(cap, np.float32)
+    life = np.empty(cap, np.float32)
+    em = np.empty(cap, np.int32)
+    for e, (start, size) in enumerate(zip(scene.layout.starts, scene.layout.sizes)):
+        L = scene.cfg.emitters[e].lifetime
+        age[start:start + size] = L - (np.arange(size) + 0.75) * (L / size)
+        life[start:start + size] = L
+        em[start:start + size] = e
     S.particle_pos.from_numpy(pos)
     S.particle_vel.from_numpy(vel)
     S.particle_age.from_numpy(age)
     S.particle_life.from_numpy(life)
     S.particle_alive.from_numpy(np.ones(cap, np.int32))
-    em = np.zeros(cap, np.int32)
-    em[scene.layout.starts[1]:] = 1
     S.particle_emitter.from_numpy(em)
-    S.particle_rand.from_numpy(np.random.default_rng(4).random(cap, dtype=np.float32))
-    return scene
+    S.particle_rand.from_numpy(np.random.default_rng(seed + 1).random(cap, dtype=np.float32))
 
 
 def _camera_args(camera):
