@@ -3,6 +3,6 @@
 A config names one with ``effect = "sparks"`` in an emitter table and overrides any key. A preset
 is data only: it adds no code path a config could not express.
 """
-from . import dust, sparks
+from . import dust, flames, smoke, sparks
 
-PRESETS = {"sparks": sparks, "dust": dust}
+PRESETS = {"sparks": sparks, "flames": flames, "smoke": smoke, "dust": dust}

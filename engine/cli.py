@@ -1,20 +1,35 @@
-"""The ``particles`` command line. Exit codes: 0 ok, 2 bad input, 3 simulation failure."""
+"""The ``particles`` command line. Exit codes: 0 ok, 2 bad input, 3 simulation failure,
+4 output failure (folder cannot be created or written, disk full), 128 + signal number when
+stopped by SIGINT (130) or SIGTERM (143)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
-EXIT_OK, EXIT_BAD_INPUT, EXIT_SIM_FAILED = 0, 2, 3
+EXIT_OK, EXIT_BAD_INPUT, EXIT_SIM_FAILED, EXIT_OUTPUT_FAILED = 0, 2, 3, 4
 
 
 class UserError(Exception):
-    """A one-line message for the user (bad input); never shown with a traceback."""
+    """A message for the user, never shown with a traceback: one line per problem."""
 
     exit_code = EXIT_BAD_INPUT
 
 
 class SimulationError(UserError):
     exit_code = EXIT_SIM_FAILED
+
+
+class OutputFailure(UserError):
+    exit_code = EXIT_OUTPUT_FAILED
+
+
+class Stopped(UserError):
+    """Stopped by a signal after writing the frames already simulated: exit 128 + signum."""
+
+    def __init__(self, message, signum):
+        super().__init__(message)
+        self.exit_code = 128 + int(signum)
 
 
 def _cmd_ode(args) -> int:
@@ -54,6 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="particles", description=__doc__)
     ap.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "metal", "gpu"],
                     help="Taichi backend (default cpu)")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="CPU threads for Taichi kernels (default: all cores); frames do not depend on it")
     sub = ap.add_subparsers(dest="command", required=True)
 
     o = sub.add_parser("ode", help="solve a reference ODE and print t, y as CSV")
@@ -75,6 +92,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--integrator", default=None,
                    help="euler, midpoint, rk4, symplectic_euler or verlet")
     r.add_argument("--overwrite", action="store_true", help="replace frames already in --out")
+    r.add_argument("--resume", action="store_true",
+                   help="continue an interrupted PNG run from its last whole frame")
+    r.add_argument("--threads", type=int, default=argparse.SUPPRESS,
+                   help="CPU threads for Taichi kernels (as before the command)")
+    r.add_argument("--arch", default=argparse.SUPPRESS, choices=["cpu", "cuda", "vulkan", "metal", "gpu"],
+                   help="Taichi backend (as before the command)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=lambda a: _commands().cmd_run(a))
 
@@ -91,7 +114,37 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--only", default=None,
                    help="comma-separated sections: step, frame, ode, startup, features, cloth")
     b.set_defaults(func=_cmd_bench)
+
+    c = sub.add_parser("chart", help="work-precision, stability and energy-drift charts (PNG + CSV)")
+    c.add_argument("--out", default=os.path.join("renders", "charts"))
+    c.add_argument("--quick", action="store_true", help="coarse sweeps (under a minute)")
+    c.add_argument("--only", default=None,
+                   help="workprec, stability, energy, or one problem (kepler, lotka-volterra, ...)")
+    c.set_defaults(func=_cmd_chart)
+
+    w = sub.add_parser("view", help="play a config in a window (mouse orbits, space pauses)")
+    w.add_argument("config")
+    w.add_argument("--frames", type=int, default=None, help="close after this many frames")
+    w.add_argument("--screenshot", default=None, help="save the last frame shown to this PNG")
+    w.set_defaults(func=lambda a: __import__("engine.viewer", fromlist=["x"]).cmd_view(a))
+
+    g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
+    g.add_argument("--out", default=os.path.join("renders", "gallery"))
+    g.add_argument("--configs", default="configs")
+    g.set_defaults(func=lambda a: __import__("engine.gallery", fromlist=["x"]).cmd_gallery(a))
     return ap
+
+
+def _cmd_chart(args) -> int:
+    from .charts import run_charts
+
+    try:
+        paths = run_charts(args.out, quick=args.quick, which=args.only)
+    except (ImportError, ValueError) as e:
+        raise UserError(str(e)) from None
+    for p in paths:
+        print(p)
+    return EXIT_OK
 
 
 def _cmd_bench(args) -> int:
@@ -117,10 +170,13 @@ def main(argv=None) -> int:
         if not getattr(args, "no_taichi", False):
             from . import runtime
 
-            runtime.init(getattr(args, "arch", "cpu"))
+            if args.threads is not None and args.threads < 1:
+                raise UserError(f"--threads: {args.threads} is not allowed: must be >= 1")
+            runtime.init(getattr(args, "arch", "cpu"), threads=args.threads)
         return args.func(args)
     except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
+        for line in str(e).splitlines() or [e.__class__.__name__]:
+            print(f"error: {line}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

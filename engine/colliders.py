@@ -90,10 +90,25 @@ class Colliders:
         v[: self.count] = vel
         self.collider_vel.from_numpy(v)
 
-    def make_func(self):
+    def index(self, name: str) -> int:
+        for k, s in enumerate(self.specs):
+            if s.name == name:
+                return k
+        raise KeyError(f"collider: no collider named {name!r} "
+                       f"(names: {', '.join(repr(s.name) for s in self.specs if s.name) or 'none'})")
+
+    def set_target(self, k: int, t_now: float, t_next: float, position) -> None:
+        """Control: collider k moves linearly to ``position`` by ``t_next`` (its velocity is
+        inferred from the motion, so it pushes what it hits)."""
+        s = self.specs[k]
+        s.path = [(t_now, tuple(float(c) for c in s.position_at(t_now))),
+                  (max(t_next, t_now + 1e-9), tuple(float(c) for c in position))]
+
+    def make_func(self, report: bool = False):
         """``collide(x, v) -> (x', v', killed, hits)`` for one point; the per-collider loop is
         unrolled at compile time. ``hits`` counts contacts resolved; ``killed`` is 1 when a
-        collider with ``kill`` was touched."""
+        collider with ``kill`` was touched. With ``report`` it also returns the last contact's
+        collider index (−1: none), normal and impact speed −N·v_r (m/s)."""
         kinds, kills, count = self.kinds, self.kills, self.count
         cp, cn, cr = self.collider_point, self.collider_normal, self.collider_radius
         cv, ce, cf = self.collider_vel, self.collider_restitution, self.collider_friction
@@ -102,6 +117,9 @@ class Colliders:
         def collide(x, v):
             killed = 0
             hits = 0
+            which = -1
+            n_hit = ti.Vector([0.0, 0.0, 0.0])
+            speed = 0.0
             for k in ti.static(range(count)):
                 N = ti.Vector([0.0, 1.0, 0.0])
                 depth = 0.0  # signed distance: negative inside
@@ -120,6 +138,9 @@ class Colliders:
                     x = x - depth * N  # project back onto the surface
                     vr = v - cv[k]
                     vn_s = vr.dot(N)
+                    which = k
+                    n_hit = N
+                    speed = ti.max(0.0, -vn_s)
                     if vn_s < 0.0:
                         vn = vn_s * N
                         vt = vr - vn
@@ -129,6 +150,11 @@ class Colliders:
                         if vt_len > 1e-12:
                             scale = ti.max(0.0, 1.0 - cf[k] * (1.0 + e) * ti.abs(vn_s) / vt_len)
                         v = scale * vt - e * vn + cv[k]
-            return x, v, killed, hits
+            return x, v, killed, hits, which, n_hit, speed
 
-        return collide
+        @ti.func
+        def collide4(x, v):
+            x2, v2, killed, hits, _which, _normal, _speed = collide(x, v)
+            return x2, v2, killed, hits
+
+        return collide if report else collide4

@@ -6,7 +6,7 @@ import os
 import sys
 import time
 
-from .cli import SimulationError, UserError
+from .cli import OutputFailure, SimulationError, Stopped, UserError
 from .config import ConfigError, load_config, read_toml
 
 OUTPUT_ROOT = "renders"
@@ -27,19 +27,38 @@ def _overrides(args) -> dict:
     return o
 
 
+def scene_config(path, args=None):
+    """The validated config ``particles run`` and ``validate`` both use: the TOML file, its name
+    from the file name unless it sets one, and the command line's overrides. Raises ConfigError."""
+    data = read_toml(path)
+    if data.get("name", "") == "":
+        data["name"] = os.path.splitext(os.path.basename(path))[0]
+    if getattr(args, "frames", None) is not None:
+        data.pop("duration", None)
+        data["frames"] = args.frames
+    return load_config(data, _overrides(args) if args is not None else None)
+
+
 def load_scene_config(path, args):
+    if getattr(args, "frames", None) is not None and args.frames < 1:
+        raise UserError(f"--frames: {args.frames} is not allowed: must be >= 1")
     try:
-        data = read_toml(path)
-        if getattr(args, "frames", None) is not None:
-            if args.frames < 1:
-                raise UserError(f"--frames: {args.frames} is not allowed: must be >= 1")
-            data.pop("duration", None)
-            data["frames"] = args.frames
-        if not data.get("name"):
-            data["name"] = os.path.splitext(os.path.basename(path))[0]
-        return load_config(data, _overrides(args))
+        return scene_config(path, args)
     except ConfigError as e:
-        raise UserError(f"{path}: " + "; ".join(e.problems)) from None
+        raise UserError("\n".join(f"{path}: {p}" for p in e.problems)) from None
+
+
+def output_dir(cfg, args) -> str:
+    """--out as given, else renders/<output or name>; a config's ``output`` must stay inside
+    renders/, also through symbolic links."""
+    if args.out:
+        return args.out
+    out_dir = os.path.join(OUTPUT_ROOT, cfg.output or cfg.name)
+    root = os.path.realpath(OUTPUT_ROOT)
+    if os.path.commonpath([root, os.path.realpath(out_dir)]) != root:
+        raise UserError(f"output: {out_dir!r} leads outside {OUTPUT_ROOT}/ (through a symbolic "
+                        f"link); use --out for other places")
+    return out_dir
 
 
 class Progress:
@@ -67,51 +86,92 @@ class Progress:
             print(file=sys.stderr)
 
 
+def _open_output(cfg, args, out_dir) -> int:
+    """Prepare the output folder; returns the first frame to render (> 0 only with --resume)."""
+    from . import runtime
+    from .render.output import OutputError, OutputRefused, prepare_dir
+    from .render.resume import prepare_resume, run_record, write_record
+
+    if args.resume and args.overwrite:
+        raise UserError("--resume and --overwrite: choose one")
+    if args.resume and args.format != "png":
+        raise UserError(f"--resume: works for PNG frames only, not --format {args.format} "
+                        f"(a partial movie is never kept)")
+    record = run_record(cfg, args.format, runtime.ensure_init())
+    try:
+        first = prepare_resume(out_dir, record) if args.resume and os.path.isdir(out_dir) else 0
+        if first == 0:
+            prepare_dir(out_dir, args.overwrite)
+        write_record(out_dir, record)
+    except OutputRefused as e:
+        raise UserError(str(e)) from None
+    except OutputError as e:
+        raise OutputFailure(str(e)) from None
+    except OSError as e:
+        raise OutputFailure(f"--out: cannot write to {out_dir}: {e.strerror or e}") from None
+    return first
+
+
 def cmd_run(args) -> int:
-    from .render.output import FrameWriter, OutputError, prepare_dir
+    from .render.output import FrameWriter, OutputError
     from .scene import DivergenceError, Scene
+    from .signals import StopRequest
 
     cfg = load_scene_config(args.config, args)
-    out_dir = args.out or os.path.join(OUTPUT_ROOT, cfg.name)
-    try:
-        prepare_dir(out_dir, args.overwrite)
-    except OutputError as e:
-        raise UserError(str(e)) from None
+    out_dir = output_dir(cfg, args)
+    first = _open_output(cfg, args, out_dir)
     t_start = time.perf_counter()
     scene = Scene(cfg)
     t_built = time.perf_counter()
     total = cfg.frame_count
     writer = FrameWriter(out_dir, args.format, cfg.fps, cfg.name)
     progress = Progress(total, args.quiet)
-    failure = None
-    try:
-        for k in range(total):
-            scene.advance_frame()
-            writer.submit(k, scene.render())
-            progress.update(k + 1, scene.stats.alive)
-    except DivergenceError as e:
-        failure = e
-    except OutputError as e:
-        writer.close(finished=False) if writer._thread.is_alive() else None
-        raise UserError(str(e)) from None
-    finally:
-        progress.done()
-    try:
-        writer.close(finished=failure is None)
-    except OutputError as e:
-        raise UserError(str(e)) from None
+    failure = out_failure = None
+    with StopRequest() as stop:
+        try:
+            for k in range(total):
+                if stop.requested:
+                    break
+                scene.advance_frame()
+                if k >= first:  # --resume: frames before `first` are on disk already
+                    writer.submit(k, scene.render())
+                progress.update(k + 1, scene.stats.alive)
+        except DivergenceError as e:
+            failure = e
+        except OutputError as e:
+            out_failure = e
+        finally:
+            progress.done()
+        try:
+            writer.close(finished=failure is None and out_failure is None and not stop.requested)
+        except OutputError as e:
+            out_failure = out_failure or e
     wall = time.perf_counter() - t_start
     st = scene.stats
+    done = first + len(writer.written) if args.format == "png" else 0
+    kept = f"frames 0..{done - 1} kept in {out_dir}" if done else f"no frames kept in {out_dir}"
+    if out_failure is not None:
+        raise OutputFailure(f"{out_failure} ({kept})")
     if failure is not None:
-        raise SimulationError(f"{failure} (frames 0..{st.frames - 2} kept in {out_dir})")
+        raise SimulationError(f"{failure} ({kept})")
+    if stop.requested:
+        raise Stopped(f"stopped by {stop.name} after {st.frames} of {total} frames ({kept}); "
+                      f"continue with --resume", stop.signum)
     sim_fps = st.frames / max(time.perf_counter() - t_built, 1e-9)
     dropped = scene.dropped()
-    if not args.quiet or True:
-        print(f"{cfg.name}: {st.frames} frames ({args.format}) in {out_dir}; {st.steps} steps"
-              f" ({st.rejected} rejected), {cfg.solver.integrator}"
-              f"{' adaptive' if cfg.solver.adaptive else ''}; peak live particles {st.peak_alive:,}"
-              f" of {scene.layout.capacity:,}; dropped {dropped:,}; {wall:.2f} s wall"
-              f" ({sim_fps:.1f} frames/s after {t_built - t_start:.2f} s build)")
+    parts = []
+    if scene.particles is not None:
+        parts.append(f"{st.steps} steps ({st.rejected} rejected), {cfg.solver.integrator}"
+                     f"{' adaptive' if cfg.solver.adaptive else ''}; peak live particles "
+                     f"{st.peak_alive:,} of {scene.capacity:,}; dropped {dropped:,}")
+    for b in scene.bodies:
+        sysm = b.system
+        parts.append(f"{b.cfg.type} {b.cfg.name or ''}: {b.topology.node_count:,} nodes, "
+                     f"{b.topology.spring_count:,} springs, {sysm.integrator} × "
+                     f"{sysm.substeps_for(scene.frame_dt)} substeps/frame")
+    print(f"{cfg.name}: {st.frames} frames ({args.format}) in {out_dir}"
+          f"{f' (resumed at frame {first})' if first else ''}; " + "; ".join(parts)
+          + f"; {wall:.2f} s wall ({sim_fps:.1f} frames/s after {t_built - t_start:.2f} s build)")
     if dropped:
         print(f"warning: {dropped:,} particles did not fit their emitters' pools "
               f"(raise the emitter's capacity)", file=sys.stderr)
@@ -122,7 +182,7 @@ def cmd_validate(args) -> int:
     bad = 0
     for path in args.configs:
         try:
-            load_config(path)
+            scene_config(path)
             print(f"{path}: ok")
         except ConfigError as e:
             bad += 1

@@ -16,6 +16,11 @@ def particles(*args, cwd=None):
                           cwd=cwd or ROOT, env=ENV, timeout=300)
 
 
+def visible(folder):
+    """The files a user sees: the run record and temporaries are hidden dot-files."""
+    return sorted(f for f in os.listdir(folder) if not f.startswith("."))
+
+
 def load(path):
     return np.asarray(Image.open(path).convert("RGB"))
 
@@ -26,7 +31,7 @@ def test_run_renders_non_blank_frames(tmp_path, config):
     r = particles("run", f"configs/{config}.toml", "--frames", "12", "--out", str(out), "--quiet",
                   "--size", "160x90")
     assert r.returncode == 0, r.stderr
-    files = sorted(os.listdir(out))
+    files = visible(out)
     assert files == [f"frame_{k:05d}.png" for k in range(12)]
     img = load(out / files[-1])
     assert img.shape == (90, 160, 3)
@@ -44,7 +49,7 @@ def test_same_config_and_seed_give_byte_identical_pngs(tmp_path):
                       "--size", "128x72")
         assert r.returncode == 0, r.stderr
         outs.append(out)
-    for name in sorted(os.listdir(outs[0])):
+    for name in visible(outs[0]):
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
 
 
@@ -94,12 +99,24 @@ def test_validate_and_list_shipped_configs():
     assert r.returncode == 0 and "sparks.toml" in r.stdout and "dust" in r.stdout
 
 
+def test_mp4_output(tmp_path):
+    out = tmp_path / "m"
+    r = particles("run", "configs/dust.toml", "--frames", "8", "--out", str(out), "--format", "mp4",
+                  "--quiet", "--size", "96x54", "--arch", "cpu")
+    assert r.returncode == 0, r.stderr
+    assert visible(out) == ["dust.mp4"]
+    import imageio.v2 as imageio
+
+    frames = list(imageio.get_reader(str(out / "dust.mp4")))
+    assert len(frames) == 8 and frames[0].shape[:2] == (54, 96)
+
+
 def test_gif_output_is_whole(tmp_path):
     out = tmp_path / "g"
     r = particles("run", "configs/sparks.toml", "--frames", "6", "--out", str(out), "--format", "gif",
                   "--quiet", "--size", "96x54")
     assert r.returncode == 0, r.stderr
-    assert os.listdir(out) == ["sparks.gif"]
+    assert visible(out) == ["sparks.gif"]
     assert Image.open(out / "sparks.gif").n_frames == 6
 
 
@@ -115,5 +132,5 @@ def test_divergence_exits_3_naming_integrator_h_and_time(tmp_path, integrator):
     assert r.returncode == 3, r.stderr
     msg = r.stderr.strip().splitlines()
     assert len(msg) == 1 and integrator in msg[0] and "h=0.03333" in msg[0] and "t=" in msg[0], msg
-    frames = sorted(os.listdir(out))
+    frames = visible(out)
     assert 1 <= len(frames) < 40 and all(f.startswith("frame_") for f in frames)

@@ -131,7 +131,7 @@ def test_scene_keeps_particles_out_of_plane_and_sphere():
         p = s.positions()
         assert p[:, 1].min() >= -1e-5
         assert np.linalg.norm(p - [0.3, 0.6, 0.0], axis=1).min() >= 0.5 * (1 - 1e-5)
-    assert s.integrator.hits[None] > 1000
+    assert s.particles.integrator.hits[None] > 1000
 
 
 def test_single_particle_with_drag_matches_closed_form_rk4():
@@ -216,4 +216,18 @@ def test_pool_is_sized_from_the_emitters():
                                         "bursts": [{"count": 300, "cycles": 10, "interval": 0.2}]}])
     s = make(d)
     # 200/s × (1.5 s + one frame) + 8 slack; bursts overlapping within a lifetime: 300 × (ceil(0.5/0.2)+1)
-    assert s.layout.sizes == [math.ceil(200 * (1.5 + 1 / 30)) + 8, 300 * 4 + 8]
+    assert s.particles.layout.sizes == [math.ceil(200 * (1.5 + 1 / 30)) + 8, 300 * 4 + 8]
+
+
+def test_moving_emitter_follows_its_path_and_hands_down_its_velocity():
+    d = scene_dict(frames=1, fps=30, emitters=[{
+        "rate": 300.0, "lifetime": 100.0, "speed": [0.0, 0.0], "inherit_velocity": 1.0,
+        "path": [{"time": 0.0, "position": [0.0, 1.0, 0.0]}, {"time": 1.0, "position": [2.0, 1.0, 0.0]}]}])
+    s = make(d)
+    for _ in range(15):
+        s.advance_frame()
+    v = s.velocities()
+    np.testing.assert_allclose(v, np.tile([2.0, 0.0, 0.0], (len(v), 1)), atol=1e-4)
+    p = s.positions()
+    # a particle born at t_b sits where the emitter was then and has moved 2 m/s since: x = 2·t
+    np.testing.assert_allclose(p[:, 0], 2.0 * 0.5, atol=1e-3)

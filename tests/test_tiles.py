@@ -31,7 +31,7 @@ def test_tiled_matches_serial_splat(path):
     r = s.renderer
     serial = s.render()
     ref = _buffers(r)
-    tiled = TiledSplat(s.state, look_of(r), targets_of(r), r.W, r.H, min_pairs=16,
+    tiled = TiledSplat(s.particles.state, look_of(r), targets_of(r), r.W, r.H, min_pairs=16,
                        pairs_per_particle=0.01)  # forces the pair list to grow
     img = render_tiled(r, tiled, s.camera)
     assert tiled.pair_capacity >= tiled.last_pairs > 16
@@ -56,7 +56,7 @@ s = Scene(load_config("configs/sparks.toml"), width=200, height=120)
 for _ in range(12):
     s.advance_frame()
 r = s.renderer
-t = TiledSplat(s.state, look_of(r), targets_of(r), r.W, r.H)
+t = TiledSplat(s.particles.state, look_of(r), targets_of(r), r.W, r.H)
 h = hashlib.sha256(render_tiled(r, t, s.camera).tobytes())
 for b in targets_of(r)[:4]:
     h.update(b.to_numpy().tobytes())

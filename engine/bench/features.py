@@ -87,7 +87,7 @@ class KernelLog:
 
 def _what_compiled(scene):
     R = scene.renderer
-    parts = [f"forces: {'+'.join(scene.forces.names) or 'none'}",
+    parts = [f"forces: {'+'.join(scene.particles.forces.names) or 'none'}",
              f"colliders compiled: {scene.colliders.count}",
              f"OIT path: {'yes' if R.uses_alpha else 'no'}",
              f"streaks: {'yes' if any(e.streak > 0 for e in scene.cfg.emitters) else 'no'}"]
@@ -109,7 +109,7 @@ def run(quick: bool = False):
         with KernelLog() as log:
             scene = build_scene(n, width=W, height=H, config=cfg)
             R = scene.renderer
-            tiled = TiledSplat(scene.state, look_of(R), targets_of(R), R.W, R.H)
+            tiled = TiledSplat(scene.particles.state, look_of(R), targets_of(R), R.W, R.H)
 
             def frame():
                 scene.advance_frame()
@@ -125,8 +125,8 @@ def run(quick: bool = False):
         kernels = sorted(set(log.names))
         if not scene.cfg.colliders:
             assert scene.colliders.count == 0
-        if "drag" not in scene.forces.names:
-            assert not scene.forces.use_drag
+        if "drag" not in scene.particles.forces.names:
+            assert not scene.particles.forces.use_drag
         if not R.uses_alpha:
             assert all(e.blend != "alpha" for e in scene.cfg.emitters)
         rows.append(Row(sec, name, t * 1e3, "ms/frame",

@@ -50,13 +50,14 @@ def build_scene(n: int, streak: float = 0.0, width: int = W, height: int = H, co
 
 def fill_steady(scene, seed: int = 3):
     """Every slot alive, in view, ages spread so each emitter's ring retires in order."""
-    S = scene.state
-    cap = scene.layout.capacity
+    P = scene.particles
+    S = P.state
+    cap = P.layout.capacity
     pos, vel, _, _ = initial_state(cap, seed=seed)
     age = np.empty(cap, np.float32)
     life = np.empty(cap, np.float32)
     em = np.empty(cap, np.int32)
-    for e, (start, size) in enumerate(zip(scene.layout.starts, scene.layout.sizes)):
+    for e, (start, size) in enumerate(zip(P.layout.starts, P.layout.sizes)):
         L = scene.cfg.emitters[e].lifetime
         age[start:start + size] = L - (np.arange(size) + 0.75) * (L / size)
         life[start:start + size] = L
@@ -82,7 +83,7 @@ def run(quick: bool = False):
     repeats = 3 if quick else 7
     scene = build_scene(n, width=w, height=h)
     R = scene.renderer
-    tiled = TiledSplat(scene.state, look_of(R), targets_of(R), R.W, R.H)
+    tiled = TiledSplat(scene.particles.state, look_of(R), targets_of(R), R.W, R.H)
     args = _camera_args(scene.camera)
     cam = scene.camera
 
@@ -102,7 +103,7 @@ def run(quick: bool = False):
     t_splat_s = time_median(lambda: R._splat(*args), max(2, repeats // 2), warmup=0)
     t_res = time_median(lambda: R._resolve(R.cfg.exposure), repeats, warmup=0)
     t_read = time_median(lambda: R.image.to_numpy(), repeats, warmup=0)
-    live = int(scene.integrator.count_alive())
+    live = int(scene.particles.count_alive())
     label = f"{n / 1e6:g}M" if n >= 1_000_000 else f"{n // 1000}k"
     sec = f"full frame, {label} live particles at {w}x{h}"
     rows = [

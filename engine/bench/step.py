@@ -50,7 +50,7 @@ def build_engine_scene(n: int):
     from ..scene import Scene
 
     scene = Scene(load_config(scene_config(n)), render=False)
-    S = scene.state
+    S = scene.particles.state
     pos, vel, age, life = initial_state(n)
     S.particle_pos.from_numpy(pos)
     S.particle_vel.from_numpy(vel)
@@ -104,11 +104,12 @@ def measure(n: int, repeats: int):
     from . import kernels
 
     scene = build_engine_scene(n)
-    S = scene.state
+    P = scene.particles
+    S = P.state
     npst = NumpyStep(n)
     t_engine = time_median(lambda: scene.advance(H), repeats, warmup=2)
-    t_kernel = time_median(lambda: scene.integrator.step_fixed(scene.t, H), repeats, warmup=1)
-    alive = int(scene.integrator.count_alive())
+    t_kernel = time_median(lambda: P.integrator.step_fixed(scene.t, H), repeats, warmup=1)
+    alive = int(P.integrator.count_alive())
     t_np = time_median(npst.step, max(3, repeats // 3), warmup=1, taichi=False)
     t_bw = time_median(lambda: kernels.stream_rmw(S.particle_pos, S.particle_vel, S.particle_age,
                                                   S.particle_life, 1.0, 0.0), repeats, warmup=2)

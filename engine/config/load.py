@@ -4,6 +4,7 @@ from __future__ import annotations
 import copy
 import difflib
 import os
+import re
 import sys
 import typing
 from typing import Any, List, Union
@@ -26,11 +27,36 @@ class ConfigError(Exception):
         super().__init__("; ".join(problems))
 
 
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def key_name(part) -> str:
+    """A key as TOML would write it: bare when it can be, else a quoted string with escapes, so a
+    key holding a newline, a dot or nothing at all still names itself on one line."""
+    if not isinstance(part, str):
+        part = str(part)
+    if _BARE_KEY.fullmatch(part):
+        return part
+    out = ['"']
+    for ch in part:
+        if ch in '"\\':
+            out.append("\\" + ch)
+        elif not ch.isprintable():  # control and line-break characters (U+0085, U+2028...)
+            out.append(f"\\u{ord(ch):04x}" if ord(ch) <= 0xFFFF else f"\\U{ord(ch):08x}")
+        else:
+            out.append(ch)
+    return "".join(out) + '"'
+
+
 def _key_path(loc) -> str:
     out = ""
     for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            name = key_name(str(part))
+            out += f".{name}" if out else name
+    return out or "config"
 
 
 def _model_at(loc) -> typing.Optional[type]:
@@ -69,41 +95,49 @@ def _short(v) -> str:
 
 
 def format_errors(err: ValidationError) -> List[str]:
+    """One line per pydantic error, each starting with the key path it is about."""
     lines = []
     for e in err.errors():
-        loc = list(e["loc"])
-        # drop the tag pydantic inserts for a tagged union: colliders[0].sphere.radius
-        clean = [p for i, p in enumerate(loc)
-                 if not (i > 0 and isinstance(loc[i - 1], int) and p in ("plane", "sphere"))]
-        path = _key_path(clean)
-        kind, msg = e["type"], e["msg"]
-        if kind == "extra_forbidden":
-            parent = _model_at([p for p in loc[:-1]])
-            names = list(parent.model_fields) if parent else []
-            near = difflib.get_close_matches(str(loc[-1]), names, n=1, cutoff=0.5)
-            hint = f"; did you mean {near[0]!r}?" if near else (
-                f"; valid keys: {', '.join(names)}" if names else "")
-            lines.append(f"{path}: unknown key{hint}")
-        elif kind == "value_error":
-            text = msg.removeprefix("Value error, ")
-            key, sep, rest = text.partition(": ")
-            if sep and " " not in key:
-                lines.append(f"{_key_path(clean + [key])}: {rest}")
-            else:
-                lines.append(f"{path or 'config'}: {text}")
-        elif kind == "missing":
-            lines.append(f"{path}: required key is missing")
-        elif kind == "union_tag_invalid" or kind == "union_tag_not_found":
-            lines.append(f"{path}.type: {_short(e.get('input', {}).get('type') if isinstance(e.get('input'), dict) else e.get('input'))} "
-                         f"is not allowed; expected 'plane' or 'sphere'")
-        else:
-            lines.append(f"{path}: {_short(e.get('input'))} is not allowed: {msg[0].lower() + msg[1:]}")
+        try:
+            line = _format_error(e)
+        except Exception:  # never let formatting hide the problem itself
+            line = f"{_key_path(e.get('loc', ()))}: {e.get('msg', 'invalid value')}"
+        lines.append(" ".join(line.splitlines()))
     return lines
 
 
-def apply_presets(data: dict) -> dict:
+def _format_error(e) -> str:
+    loc = list(e["loc"])
+    # drop the tag pydantic inserts for the collider union: colliders[0].sphere.radius
+    clean = [p for i, p in enumerate(loc)
+             if not (i == 2 and loc[0] == "colliders" and p in ("plane", "sphere"))]
+    path = _key_path(clean)
+    kind, msg = e["type"], e["msg"]
+    if kind == "extra_forbidden":
+        parent = _model_at([p for p in loc[:-1]])
+        names = list(parent.model_fields) if parent else []
+        near = difflib.get_close_matches(str(loc[-1]), names, n=1, cutoff=0.5)
+        hint = f"; did you mean {near[0]!r}?" if near else (
+            f"; valid keys: {', '.join(names)}" if names else "")
+        return f"{path}: unknown key{hint}"
+    elif kind in ("value_error", "config_check"):
+        return f"{path}: {msg.removeprefix('Value error, ')}"
+    elif kind == "missing":
+        return f"{path}: required key is missing"
+    elif kind == "union_tag_not_found":
+        return f"{path}.type: required key is missing; expected 'plane' or 'sphere'"
+    elif kind == "union_tag_invalid":
+        given = e.get("input")
+        given = given.get("type") if isinstance(given, dict) else given
+        return f"{path}.type: {_short(given)} is not allowed; expected 'plane' or 'sphere'"
+    else:
+        return f"{path}: {_short(e.get('input'))} is not allowed: {msg[:1].lower() + msg[1:]}"
+
+
+def apply_presets(data: dict):
     """Fill each emitter from its ``effect`` preset (effects/<name>.py), key by key: what the
-    config says wins. Unknown preset names are reported like any bad value."""
+    config says wins. Returns (data, problems): an unknown preset name is one problem, and the
+    rest of the config is still checked."""
     from effects import PRESETS
 
     data = copy.deepcopy(data)
@@ -116,23 +150,25 @@ def apply_presets(data: dict) -> dict:
                 problems.append(f"emitters[{i}].effect: {_short(name)} is not a preset"
                                 + (f"; did you mean {near[0]!r}?" if near else "")
                                 + f" (presets: {', '.join(PRESETS)})")
+                del em["effect"]  # reported above; check the rest of the emitter as it is
                 continue
             merged = copy.deepcopy(PRESETS[name].EMITTER)
             merged.update(em)
             data["emitters"][i] = merged
-    if problems:
-        raise ConfigError(problems)
-    return data
+    return data, problems
 
 
 def validate(data: dict) -> Scene:
     if not isinstance(data, dict):
         raise ConfigError([f"config: expected a table of keys, got {type(data).__name__}"])
-    data = apply_presets(data)
+    data, problems = apply_presets(data)
     try:
-        return Scene.model_validate(data)
+        scene = Scene.model_validate(data)
     except ValidationError as e:
-        raise ConfigError(format_errors(e)) from None
+        raise ConfigError(problems + format_errors(e)) from None
+    if problems:
+        raise ConfigError(problems)
+    return scene
 
 
 def read_toml(path: Union[str, os.PathLike]) -> dict:

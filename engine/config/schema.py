@@ -10,9 +10,13 @@ Units: metres, seconds, degrees for angles; colours are linear RGB (values above
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, List, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from ..particles.capacity import MAX_POOL, pool_sizes
 
 INTEGRATORS = ("euler", "midpoint", "rk4", "symplectic_euler", "verlet")
 
@@ -34,14 +38,67 @@ ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_le
 MAX_STOPS = 8
 
 
-def _check_curve(stops, name):
+def _check_curve(stops):
     if stops is None:
-        return
+        return None
     if not 1 <= len(stops) <= MAX_STOPS:
-        raise ValueError(f"{name}: needs 1 to {MAX_STOPS} stops, got {len(stops)}")
+        return f"needs 1 to {MAX_STOPS} stops, got {len(stops)}"
     ts = [s[0] for s in stops]
     if any(t < 0 or t > 1 for t in ts) or any(b < a for a, b in zip(ts, ts[1:])):
-        raise ValueError(f"{name}: stop times must lie in [0, 1] and increase, got {ts}")
+        return f"stop times must lie in [0, 1] and increase, got {ts}"
+    return None
+
+
+def _check_path(path):
+    ts = [k.time for k in path]
+    if any(b <= a for a, b in zip(ts, ts[1:])):
+        return f"keyframe times must increase, got {ts}"
+    return None
+
+
+def _report(model, problems):
+    """Raise every cross-key problem found in ``model`` at once, each at its own key:
+    ``problems`` is a list of (key, message) with message None for "no problem"."""
+    errors = [InitErrorDetails(type=PydanticCustomError("config_check", "{text}", {"text": text}),
+                               loc=key if isinstance(key, tuple) else (key,),
+                               input=getattr(model, key, None) if isinstance(key, str) else None)
+              for key, text in problems if text]
+    if errors:
+        raise ValidationError.from_exception_data(type(model).__name__, errors)
+    return model
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _check_name(name: str) -> str:
+    """A config name becomes a folder and file name: one plain path component."""
+    if name and (_CONTROL.search(name) or "/" in name or "\\" in name or ":" in name
+                 or name.startswith(".") or len(name) > 100):
+        raise ValueError(f"{name!r} must be a plain file name: no '/', '\\', ':' or control "
+                         f"characters, not starting with '.', at most 100 characters")
+    return name
+
+
+def _check_output(out: Optional[str]) -> Optional[str]:
+    """``output`` is a folder inside the output root (renders/): relative, no '..', no drive."""
+    if out is None:
+        return out
+    parts = out.split("/")
+    why = None
+    if not out.strip():
+        why = "must not be empty"
+    elif _CONTROL.search(out) or "\\" in out or ":" in out:
+        why = "must not hold '\\', ':' (a drive letter) or control characters"
+    elif out.startswith("/") or out.startswith("~"):
+        why = "must be relative to the output folder renders/ (use --out for other places)"
+    elif any(p in ("", ".", "..") for p in parts):
+        why = "must not hold '..', '.' or empty parts: it stays inside renders/"
+    elif len(out) > 200:
+        why = "must be at most 200 characters"
+    if why:
+        raise ValueError(f"{out!r} {why}")
+    return out
 
 
 class Keyframe(Strict):
@@ -60,6 +117,16 @@ class Burst(Strict):
     interval: Positive = 1.0
 
 
+class SubEmitter(Strict):
+    """Spawn ``count`` particles of emitter ``emitter`` where a particle of this one dies or hits a
+    collider (with a velocity change of at least ``min_speed`` m/s)."""
+
+    event: Literal["death", "collision"] = "death"
+    emitter: str
+    count: Annotated[int, Field(ge=1, le=64)] = 1
+    min_speed: NonNeg = 1.0
+
+
 class Emitter(Strict):
     name: str = ""
     effect: Optional[str] = None  # a preset from effects/ that this emitter starts from
@@ -74,12 +141,19 @@ class Emitter(Strict):
     speed: Annotated[List[NonNeg], Field(min_length=2, max_length=2)] = [1.0, 1.0]  # [min, max] m/s
     inherit_velocity: Annotated[float, Field(ge=-10, le=10)] = 0.0
     rate: Annotated[float, Field(ge=0, le=1e8)] = 0.0  # particles per second
+    emitting: bool = True  # Godot's name: false = silent until code starts it or calls burst()
+    # (such an emitter gets at least 1024 pool slots unless `capacity` says otherwise)
     bursts: List[Burst] = []
     start: NonNeg = 0.0  # emission window, seconds
     stop: Optional[NonNeg] = None
     lifetime: Annotated[float, Field(gt=0, le=1e4)] = 1.0
     lifetime_randomness: Fraction01 = 0.0  # lifetime × (1 − randomness·u), u ∈ [0, 1)
     drag: Optional[NonNeg] = None  # overrides forces.drag for this emitter's particles
+    gravity_scale: Annotated[float, Field(ge=-100, le=100)] = 1.0  # 0: neutrally buoyant (smoke)
+    buoyancy: Annotated[float, Field(ge=-1e3, le=1e3)] = 0.0  # upward m/s² while hot
+    cooling: Positive = 1.0  # buoyancy decays as exp(−age / cooling), seconds
+    turbulence: NonNeg = 1.0  # scales forces.turbulence for this emitter's particles
+    sub_emitters: Annotated[List[SubEmitter], Field(max_length=4)] = []
     capacity: Optional[Annotated[int, Field(ge=1, le=50_000_000)]] = None
     # look
     blend: Literal["additive", "alpha"] = "additive"
@@ -91,24 +165,18 @@ class Emitter(Strict):
 
     @model_validator(mode="after")
     def _check(self):
-        for name in ("color", "alpha", "size"):
-            _check_curve(getattr(self, name), name)
-        if self.speed[1] < self.speed[0]:
-            raise ValueError(f"speed: [min, max] needs min <= max, got {self.speed}")
-        if math.fsum(c * c for c in self.direction) < 1e-12:
-            raise ValueError(f"direction: must not be zero, got {self.direction}")
-        if self.stop is not None and self.stop < self.start:
-            raise ValueError(f"stop: {self.stop} is before start {self.start}")
-        if self.rate == 0 and not self.bursts:
-            raise ValueError("rate: an emitter needs a rate > 0 or at least one burst")
-        _check_path(self.path)
-        return self
-
-
-def _check_path(path):
-    ts = [k.time for k in path]
-    if any(b <= a for a, b in zip(ts, ts[1:])):
-        raise ValueError(f"path: keyframe times must increase, got {ts}")
+        return _report(self, [
+            ("color", _check_curve(self.color)),
+            ("alpha", _check_curve(self.alpha)),
+            ("size", _check_curve(self.size)),
+            ("speed", f"[min, max] needs min <= max, got {self.speed}"
+             if self.speed[1] < self.speed[0] else None),
+            ("direction", f"must not be zero, got {self.direction}"
+             if math.fsum(c * c for c in self.direction) < 1e-12 else None),
+            ("stop", f"{self.stop} is before start {self.start}"
+             if self.stop is not None and self.stop < self.start else None),
+            ("path", _check_path(self.path)),
+        ])
 
 
 class _ColliderBase(Strict):
@@ -127,10 +195,11 @@ class PlaneCollider(_ColliderBase):
 
     @model_validator(mode="after")
     def _check(self):
-        if math.fsum(c * c for c in self.normal) < 1e-12:
-            raise ValueError(f"normal: must not be zero, got {self.normal}")
-        _check_path(self.path)
-        return self
+        return _report(self, [
+            ("normal", f"must not be zero, got {self.normal}"
+             if math.fsum(c * c for c in self.normal) < 1e-12 else None),
+            ("path", _check_path(self.path)),
+        ])
 
 
 class SphereCollider(_ColliderBase):
@@ -140,11 +209,96 @@ class SphereCollider(_ColliderBase):
 
     @model_validator(mode="after")
     def _check(self):
-        _check_path(self.path)
-        return self
+        return _report(self, [("path", _check_path(self.path))])
 
 
 Collider = Annotated[Union[PlaneCollider, SphereCollider], Field(discriminator="type")]
+
+
+class Turbulence(Strict):
+    """Curl-noise turbulence (Bridson et al. 2007): a divergence-free acceleration field, so smoke
+    swirls instead of compressing. ``frequency`` in 1/m, ``scroll`` in m/s (the pattern rises)."""
+
+    strength: NonNeg = 0.0  # m/s²
+    frequency: Positive = 1.0
+    scroll: Finite = 0.5
+    octaves: Annotated[int, Field(ge=1, le=4)] = 2
+
+
+class Attractor(Strict):
+    """Pulls particles toward ``position`` (negative strength pushes): a = s · d̂ / (1 + (|d|/r)²)."""
+
+    position: Vec3
+    strength: Finite = 1.0
+    radius: Positive = 1.0
+
+
+class Vortex(Strict):
+    """Swirls particles around the axis through ``position``: tangential a = s · g(ρ/r), with
+    g peaking at ρ = r."""
+
+    position: Vec3 = [0.0, 0.0, 0.0]
+    axis: Vec3 = [0.0, 1.0, 0.0]
+    strength: Finite = 1.0
+    radius: Positive = 1.0
+
+    @model_validator(mode="after")
+    def _check(self):
+        return _report(self, [("axis", f"must not be zero, got {self.axis}"
+                               if math.fsum(c * c for c in self.axis) < 1e-12 else None)])
+
+
+class Body(Strict):
+    """A soft body: a spring network built by a topology builder (engine/springs/topology.py).
+
+    chain: ``segments`` + 1 nodes from ``position`` along ``direction`` over ``length``.
+    hair: ``strands`` strands of ``segments`` from roots on a scalp cap (centre ``position``,
+    ``radius``, ``cap_angle``) or a line (``position`` → ``line_end``). cloth: a
+    ``resolution = [nx, ny]`` grid of ``size = [w, d]`` in ``plane`` "xz" (flat) or "xy" (hanging)
+    from ``position``. jelly: a ``resolution = [nx, ny, nz]`` lattice of ``size = [x, y, z]``.
+    Stiffness in N/m, damping in N·s/m, mass per node in kg."""
+
+    name: str = ""
+    type: Literal["chain", "hair", "cloth", "jelly"]
+    position: Vec3 = [0.0, 1.0, 0.0]
+    direction: Vec3 = [0.0, -1.0, 0.0]
+    length: Annotated[float, Field(gt=0, le=100)] = 1.0
+    segments: Annotated[int, Field(ge=1, le=1000)] = 20
+    strands: Annotated[int, Field(ge=1, le=5000)] = 40
+    roots: Literal["scalp", "line"] = "scalp"
+    radius: Annotated[float, Field(gt=0, le=100)] = 0.3
+    cap_angle: Annotated[float, Field(gt=0, le=180)] = 60.0  # degrees
+    line_end: Vec3 = [1.0, 1.0, 0.0]
+    resolution: Annotated[List[Annotated[int, Field(ge=2, le=512)]], Field(min_length=2, max_length=3)] = [16, 16]
+    size: Annotated[List[Positive], Field(min_length=2, max_length=3)] = [1.0, 1.0]
+    plane: Literal["xz", "xy"] = "xz"
+    mass: Annotated[float, Field(gt=0, le=1e3)] = 0.01
+    stiffness: Annotated[float, Field(gt=0, le=1e9)] = 1e3
+    damping: NonNeg = 0.0
+    bend_stiffness: Optional[Annotated[float, Field(ge=0, le=1e9)]] = None
+    pins: Union[Literal["none", "start", "corners", "top"], List[Annotated[int, Field(ge=0)]]] = "start"
+    pin_path: List[Keyframe] = []  # pinned nodes follow this path (offsets from their start)
+    release_at: Optional[NonNeg] = None  # seconds: every pin lets go
+    integrator: Optional[Literal["euler", "midpoint", "rk4", "symplectic_euler", "verlet", "xpbd"]] = None
+    substeps: Union[Literal["auto"], Annotated[int, Field(ge=1, le=10_000)]] = "auto"
+    iterations: Annotated[int, Field(ge=1, le=200)] = 10  # XPBD solver iterations per substep
+    max_stretch: Optional[Annotated[float, Field(ge=0, le=10)]] = None  # inextensibility cap
+    thickness: Annotated[float, Field(ge=0, le=1)] = 0.015  # m kept between nodes and colliders
+    color: Annotated[List[Annotated[float, Field(ge=0, le=10)]], Field(min_length=3, max_length=3)] = [0.55, 0.6, 0.7]
+
+    @model_validator(mode="after")
+    def _check(self):
+        dims = 3 if self.type == "jelly" else 2
+        grid = self.type in ("cloth", "jelly")
+        return _report(self, [
+            ("resolution", f"{self.type} needs {dims} numbers, got {self.resolution}"
+             if grid and len(self.resolution) != dims else None),
+            ("size", f"{self.type} needs {dims} numbers, got {self.size}"
+             if grid and len(self.size) != dims else None),
+            ("direction", f"must not be zero, got {self.direction}"
+             if math.fsum(c * c for c in self.direction) < 1e-12 else None),
+            ("pin_path", _check_path(self.pin_path)),
+        ])
 
 
 class Camera(Strict):
@@ -166,6 +320,9 @@ class Forces(Strict):
     gravity: Vec3 = [0.0, -9.81, 0.0]
     drag: NonNeg = 0.0  # linear drag k: a = −k (v − wind), 1/s
     wind: Vec3 = [0.0, 0.0, 0.0]  # air velocity seen by drag, m/s
+    turbulence: Turbulence = Turbulence()
+    attractors: Annotated[List[Attractor], Field(max_length=16)] = []
+    vortices: Annotated[List[Vortex], Field(max_length=16)] = []
 
 
 class Render(Strict):
@@ -176,10 +333,12 @@ class Render(Strict):
                           Field(min_length=3, max_length=3)] = [0.02, 0.025, 0.035]
     grid: bool = True
     show_colliders: bool = True
+    density_shading: Annotated[float, Field(ge=0, le=20)] = 0.6  # thick smoke/dust darkens
 
 
 class Scene(Strict):
     name: str = ""
+    output: Optional[str] = None  # folder under renders/ (default: name); --out overrides
     seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
     fps: Annotated[float, Field(ge=1, le=1000)] = 30.0
     duration: Optional[Annotated[float, Field(gt=0, le=3600)]] = None
@@ -188,14 +347,51 @@ class Scene(Strict):
     solver: Solver = Solver()
     forces: Forces = Forces()
     render: Render = Render()
-    emitters: Annotated[List[Emitter], Field(min_length=1, max_length=64)]
+    emitters: Annotated[List[Emitter], Field(max_length=64)] = []
+    bodies: Annotated[List[Body], Field(max_length=32)] = []
     colliders: Annotated[List[Collider], Field(max_length=64)] = []
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v):
+        return _check_name(v)
+
+    @field_validator("output")
+    @classmethod
+    def _output(cls, v):
+        return _check_output(v)
 
     @model_validator(mode="after")
     def _check(self):
-        if self.duration is not None and self.frames is not None:
-            raise ValueError("frames: give either duration or frames, not both")
-        return self
+        problems = [("frames", "give either duration or frames, not both"
+                     if self.duration is not None and self.frames is not None else None),
+                    ("emitters", "a scene needs at least one emitter or one body"
+                     if not self.emitters and not self.bodies else None)]
+        names = [e.name for e in self.emitters]
+        targets = set()
+        for i, em in enumerate(self.emitters):
+            for j, sub in enumerate(em.sub_emitters):
+                key = ("emitters", i, "sub_emitters", j, "emitter")
+                if sub.emitter not in names:
+                    known = ", ".join(repr(n) for n in names if n) or "none"
+                    problems.append((key, f"{sub.emitter!r} names no emitter (names: {known})"))
+                elif sub.emitter == em.name:
+                    problems.append((key, "an emitter cannot feed itself"))
+                targets.add(sub.emitter)
+        for i, em in enumerate(self.emitters):
+            if em.rate == 0 and not em.bursts and em.name not in targets and em.emitting:
+                problems.append((("emitters", i, "rate"), "an emitter needs a rate > 0, a burst, "
+                                 "to be another emitter's sub-emitter, or emitting = false (driven "
+                                 "from code)"))
+        dup = sorted({n for n in names if n and names.count(n) > 1})
+        problems.append(("emitters", f"names must be unique, repeated: {', '.join(dup)}" if dup else None))
+        slots = pool_sizes(self.emitters, 1.0 / self.fps)
+        if sum(slots) > MAX_POOL:
+            e = max(range(len(slots)), key=slots.__getitem__)
+            problems.append(("emitters", f"the pool would need {sum(slots):,} particle slots "
+                             f"(emitters[{e}] alone {slots[e]:,}: rate × lifetime + bursts); at most "
+                             f"{MAX_POOL:,}: lower rate or lifetime, or set an emitter's capacity"))
+        return _report(self, problems)
 
     @property
     def frame_count(self) -> int:

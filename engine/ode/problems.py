@@ -134,4 +134,34 @@ KEPLER = Problem(
     reference_end=(0.1, 0.0, 0.0, float(np.sqrt(19.0))), second_order=True,
 )
 
-PROBLEMS = {p.name: p for p in (GROWTH, DECAY, OSCILLATOR, DRAG, LOTKA_VOLTERRA, KEPLER)}
+
+# Damped spring on an anchor, m = 1: q'' = −(ks/m) q − (kd/m) q' with ks = 100, kd = 1 (ω = 10,
+# c = 1, underdamped). y = (q, v). Closed form with γ = c/2, ω_d = √(ω² − γ²):
+#   q = e^(−γt) (q0 cos ω_d t + (v0 + γ q0)/ω_d sin ω_d t).
+_DS_KS, _DS_KD, _DS_M = 100.0, 1.0, 1.0
+
+
+@ti.func
+def _damped_spring(y, t):
+    d = y * 0
+    d[0] = y[1]
+    d[1] = -100.0 * y[0] - 1.0 * y[1]  # −(ks q + kd v)/m with the exact constants above
+    return d
+
+
+def _damped_spring_exact(t, y0=(1.0, 0.0)):
+    gamma = 0.5 * _DS_KD / _DS_M
+    wd = np.sqrt(_DS_KS / _DS_M - gamma ** 2)
+    a, b = y0[0], (y0[1] + gamma * y0[0]) / wd
+    e, c, s = np.exp(-gamma * t), np.cos(wd * t), np.sin(wd * t)
+    return np.array([e * (a * c + b * s), e * ((b * wd - gamma * a) * c - (a * wd + gamma * b) * s)])
+
+
+DAMPED_SPRING = Problem(
+    "damped_spring", _damped_spring, (1.0, 0.0), (0.0, 2.0), exact=_damped_spring_exact,
+    second_order=True,
+    invariant=lambda y: 0.5 * _DS_M * y[1] ** 2 + 0.5 * _DS_KS * y[0] ** 2,
+)
+
+PROBLEMS = {p.name: p for p in (GROWTH, DECAY, OSCILLATOR, DRAG, DAMPED_SPRING, LOTKA_VOLTERRA,
+                                  KEPLER)}

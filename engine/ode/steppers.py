@@ -21,6 +21,19 @@ import taichi as ti
 from .tableau import TABLEAUS, ButcherTableau
 
 
+def _with_first_eval(_step, f, with_k1: bool):
+    """``_step(y, t, h, i, d1)`` takes f(y, t) precomputed (step doubling shares it between the
+    full step and the first half step); the plain stepper evaluates it itself."""
+    if with_k1:
+        return _step
+
+    @ti.func
+    def step(y, t, h, i):
+        return _step(y, t, h, i, f(y, t, i))
+
+    return step
+
+
 def rk_step(tab: ButcherTableau, f: Callable, dtype, with_k1: bool = False):
     """Explicit RK step for ``tab``. With ``with_k1`` the function takes ``f(y, t, i)`` precomputed
     as a fifth argument (step doubling shares it between the full step and the first half step).
@@ -49,14 +62,7 @@ def rk_step(tab: ButcherTableau, f: Callable, dtype, with_k1: bool = False):
                 out = out + (h * ti.cast(B[j][0], dtype) / ti.cast(B[j][1], dtype)) * ks[j]
         return out
 
-    if with_k1:
-        return _step
-
-    @ti.func
-    def step(y, t, h, i):
-        return _step(y, t, h, i, f(y, t, i))
-
-    return step
+    return _with_first_eval(_step, f, with_k1)
 
 
 def _half_masks(n: int, dtype):
@@ -66,38 +72,35 @@ def _half_masks(n: int, dtype):
     return [1] * m + [0] * m, [0] * m + [1] * m
 
 
-def symplectic_euler_step(f: Callable, n: int, dtype, with_k1: bool = False):
+def symplectic_euler_step(f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
     """Semi-implicit Euler: p⁺ = p + h f_p(q, p, t); q⁺ = q + h f_q(q, p⁺, t). Order 1, symplectic.
 
-    For particles: v⁺ = v + h a(x, v, t), x⁺ = x + h v⁺. Two evaluations of f per step (the second
-    one only needs its q-part, which for particles is just v⁺)."""
+    For particles: v⁺ = v + h a(x, v, t), x⁺ = x + h v⁺. Two evaluations of f per step; the second
+    needs only its q-part, so a caller that has a cheap ``fq`` (for particles: just v) passes it
+    and the expensive p-part (forces) is evaluated once."""
     mq, mp = _half_masks(n, dtype)
+    fq = fq or f
 
     @ti.func
     def _step(y, t, h, i, d1):
         Mq = ti.Vector(mq, dt=dtype)
         Mp = ti.Vector(mp, dt=dtype)
         y1 = y + h * (Mp * d1)
-        return y1 + h * (Mq * f(y1, t, i))
+        return y1 + h * (Mq * fq(y1, t, i))
 
-    if with_k1:
-        return _step
-
-    @ti.func
-    def step(y, t, h, i):
-        return _step(y, t, h, i, f(y, t, i))
-
-    return step
+    return _with_first_eval(_step, f, with_k1)
 
 
-def verlet_step(f: Callable, n: int, dtype, with_k1: bool = False):
+def verlet_step(f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
     """Velocity Verlet (Störmer–Verlet, kick–drift–kick):
     p½ = p + h/2 f_p(q, p, t); q⁺ = q + h f_q(q, p½, t + h/2); p⁺ = p½ + h/2 f_p(q⁺, p½, t + h).
 
     Order 2 and symplectic when f_p depends on q only. Velocity-dependent forces (drag) enter the
     closing kick as f_p(q⁺, p½): the explicit form, which drops to order 1 for such forces
-    (NUMERICS.md); the exact form would need an implicit solve for p⁺."""
+    (NUMERICS.md); the exact form would need an implicit solve for p⁺. The drift needs only the
+    q-part of f: pass a cheap ``fq`` to skip the forces there."""
     mq, mp = _half_masks(n, dtype)
+    fq = fq or f
 
     @ti.func
     def _step(y, t, h, i, d1):
@@ -105,17 +108,10 @@ def verlet_step(f: Callable, n: int, dtype, with_k1: bool = False):
         Mp = ti.Vector(mp, dt=dtype)
         half = h / 2
         y1 = y + half * (Mp * d1)
-        y2 = y1 + h * (Mq * f(y1, t + half, i))
+        y2 = y1 + h * (Mq * fq(y1, t + half, i))
         return y2 + half * (Mp * f(y2, t + h, i))
 
-    if with_k1:
-        return _step
-
-    @ti.func
-    def step(y, t, h, i):
-        return _step(y, t, h, i, f(y, t, i))
-
-    return step
+    return _with_first_eval(_step, f, with_k1)
 
 
 @dataclass(frozen=True)
@@ -140,24 +136,25 @@ assert all(METHODS[t].order == TABLEAUS[t].order and METHODS[t].fevals == TABLEA
            for t in TABLEAUS)
 
 
-def make_step(method: str, f: Callable, n: int, dtype, with_k1: bool = False):
-    """The ``ti.func`` stepper for ``method`` (one of :data:`METHODS`) on states of length n."""
+def make_step(method: str, f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
+    """The ``ti.func`` stepper for ``method`` (one of :data:`METHODS`) on states of length n.
+    ``fq`` (partitioned methods only) evaluates just the q-part of f cheaply."""
     if method in TABLEAUS:
         return rk_step(TABLEAUS[method], f, dtype, with_k1)
     if method == "symplectic_euler":
-        return symplectic_euler_step(f, n, dtype, with_k1)
+        return symplectic_euler_step(f, n, dtype, with_k1, fq)
     if method == "verlet":
-        return verlet_step(f, n, dtype, with_k1)
+        return verlet_step(f, n, dtype, with_k1, fq)
     raise ValueError(f"method: unknown value {method!r}; allowed: {', '.join(METHODS)}")
 
 
-def doubling_step(method: str, f: Callable, n: int, dtype, extrapolate: bool = False):
+def doubling_step(method: str, f: Callable, n: int, dtype, extrapolate: bool = False, fq=None):
     """Step doubling (Numerical Recipes §16.2) as one ``ti.func``: returns ``(y2, est)`` where y2 is
     two steps of h/2 (or its local extrapolation y2 + Δ/(2^p − 1), order p + 1) and
     ``est = Δ/(2^p − 1)`` with Δ = y2 − y1 estimates y2's local error. f(y, t) is evaluated once and
     shared by the full step and the first half step: Euler costs 2 evaluations, midpoint 5, RK4 11."""
     meth = METHODS[method]
-    step = make_step(method, f, n, dtype, with_k1=True)
+    step = make_step(method, f, n, dtype, with_k1=True, fq=fq)
     denom = 2 ** meth.order - 1
 
     @ti.func

@@ -1,50 +1,100 @@
 """Forces on particles as small ``ti.func`` terms, summed under ``ti.static``.
 
 The set of terms is fixed when the scene is finalised: a term the scene does not use is not
-compiled at all. Each term maps (x, v, t, i) → acceleration (m/s²); parameters a game may change
+compiled at all. Each term maps (x, v, age, t, i) → acceleration (m/s²), with the particle's age at the
+stage time (it is part of the integrated state); parameters a game may change
 at run time (gravity, wind) live in 0-d fields, so changing them recompiles nothing.
 """
 from __future__ import annotations
 
+
+import numpy as np
 import taichi as ti
+
+from .noise import curl_noise
 
 
 class Forces:
-    """Fields: ``force_gravity`` (vec3, m/s²), ``force_wind`` (vec3, m/s), ``force_drag`` (1/s,
-    the scene's linear drag; an emitter's own ``drag`` overrides it for its particles)."""
+    """Fields: ``force_gravity`` (vec3, m/s²; scaled per emitter by ``gravity_scale``),
+    ``force_wind`` (vec3, m/s), ``force_drag`` (1/s, the scene's linear drag; an emitter's own
+    ``drag`` overrides it for its particles)."""
 
     def __init__(self, cfg, emitter_configs, state, emitter_drag):
+        E = len(emitter_configs)
         self.force_gravity = ti.Vector.field(3, ti.f32, shape=())
         self.force_wind = ti.Vector.field(3, ti.f32, shape=())
         self.force_drag = ti.field(ti.f32, shape=())
         self.force_gravity[None] = cfg.gravity
         self.force_wind[None] = cfg.wind
         self.force_drag[None] = cfg.drag
-        self.use_gravity = any(g != 0.0 for g in cfg.gravity)
+        self.use_gravity = any(g != 0.0 for g in cfg.gravity) and any(
+            e.gravity_scale != 0 for e in emitter_configs)
+        self.emitter_gravity_scale = ti.field(ti.f32, shape=E)
+        self.emitter_gravity_scale.from_numpy(np.array([e.gravity_scale for e in emitter_configs], np.float32))
         self.use_drag = cfg.drag > 0 or any((e.drag or 0.0) > 0 for e in emitter_configs)
-        # Only when some emitter sets its own drag does the kernel read each particle's emitter id
-        # (4 more bytes per particle and a gather); otherwise every particle uses the scene's k.
+        # Only when some emitter sets its own drag (or gravity scale) does the kernel gather a
+        # per-emitter value by the particle's emitter id; otherwise the scene's value is used.
         self.per_emitter_drag = any(e.drag is not None for e in emitter_configs)
+        self.per_emitter_gravity = any(e.gravity_scale != 1.0 for e in emitter_configs)
+        self.use_buoyancy = any(e.buoyancy != 0 for e in emitter_configs)
+        tb = cfg.turbulence
+        self.use_turbulence = tb.strength > 0 and any(e.turbulence > 0 for e in emitter_configs)
+        self.attractor_count, self.vortex_count = len(cfg.attractors), len(cfg.vortices)
         self._state, self._emitter_drag = state, emitter_drag
-        self.extra_terms = []  # (name, ti.func) added by later features (buoyancy, noise, ...)
+        self.turbulence = tb
+        # per-emitter parameters of the optional terms, allocated only when the term is used
+        if self.use_buoyancy:
+            self.emitter_buoyancy = ti.field(ti.f32, shape=E)
+            self.emitter_inv_cooling = ti.field(ti.f32, shape=E)
+            self.emitter_buoyancy.from_numpy(np.array([e.buoyancy for e in emitter_configs], np.float32))
+            self.emitter_inv_cooling.from_numpy(np.array([1.0 / e.cooling for e in emitter_configs], np.float32))
+        if self.use_turbulence:
+            self.emitter_turbulence = ti.field(ti.f32, shape=E)
+            self.emitter_turbulence.from_numpy(np.array([e.turbulence for e in emitter_configs], np.float32))
+        if self.attractor_count:
+            n = self.attractor_count
+            self.attractor_pos = ti.Vector.field(3, ti.f32, shape=n)
+            self.attractor_strength = ti.field(ti.f32, shape=n)
+            self.attractor_radius = ti.field(ti.f32, shape=n)
+            for k, a in enumerate(cfg.attractors):
+                self.attractor_pos[k], self.attractor_strength[k], self.attractor_radius[k] = \
+                    a.position, a.strength, a.radius
+        if self.vortex_count:
+            n = self.vortex_count
+            self.vortex_pos = ti.Vector.field(3, ti.f32, shape=n)
+            self.vortex_axis = ti.Vector.field(3, ti.f32, shape=n)
+            self.vortex_strength = ti.field(ti.f32, shape=n)
+            self.vortex_radius = ti.field(ti.f32, shape=n)
+            for k, v in enumerate(cfg.vortices):
+                ax = np.asarray(v.axis, np.float64)
+                self.vortex_pos[k], self.vortex_axis[k] = v.position, (ax / np.linalg.norm(ax)).tolist()
+                self.vortex_strength[k], self.vortex_radius[k] = v.strength, v.radius
 
     @property
     def names(self):
-        return ([n for n, used in (("gravity", self.use_gravity), ("drag", self.use_drag)) if used]
-                + [n for n, _ in self.extra_terms])
+        """The terms compiled into this scene's acceleration, in order."""
+        return [n for n, used in (("gravity", self.use_gravity), ("drag", self.use_drag),
+                                  ("buoyancy", self.use_buoyancy), ("turbulence", self.use_turbulence),
+                                  ("attractors", self.attractor_count > 0),
+                                  ("vortices", self.vortex_count > 0)) if used]
 
     def make_accel(self):
-        """``accel(x, v, t, i)``: the sum of the scene's terms for particle slot i."""
+        """``accel(x, v, age, t, i)``: the sum of the scene's terms for particle slot i."""
         g, wind, kdrag = self.force_gravity, self.force_wind, self.force_drag
         pem, edrag = self._state.particle_emitter, self._emitter_drag
-        per_emitter = self.per_emitter_drag
+        per_emitter, per_emitter_g = self.per_emitter_drag, self.per_emitter_gravity
+
+        gscale = self.emitter_gravity_scale
 
         @ti.func
-        def gravity(x, v, t, i):
-            return g[None]
+        def gravity(x, v, age, t, i):
+            a = g[None]
+            if ti.static(per_emitter_g):
+                a = a * gscale[pem[i]]
+            return a
 
         @ti.func
-        def drag(x, v, t, i):
+        def drag(x, v, age, t, i):
             k = kdrag[None]
             if ti.static(per_emitter):
                 ke = edrag[pem[i]]
@@ -52,19 +102,65 @@ class Forces:
                     k = ke
             return -k * (v - wind[None])  # linear drag relative to the air (Stokes regime)
 
-        terms = []
-        if self.use_gravity:
-            terms.append(gravity)
-        if self.use_drag:
-            terms.append(drag)
-        terms += [f for _, f in self.extra_terms]
-        terms = tuple(terms)
+        available = {"gravity": gravity, "drag": drag}
+        S = self._state
+        if self.use_buoyancy:
+            bu, inv_cool = self.emitter_buoyancy, self.emitter_inv_cooling
+
+            @ti.func
+            def buoyancy(x, v, age, t, i):
+                # hot gas rises; its temperature excess decays as exp(−age/cooling) (Newton cooling)
+                e = pem[i]
+                return ti.Vector([0.0, bu[e] * ti.exp(-age * inv_cool[e]), 0.0])
+
+            available["buoyancy"] = buoyancy
+        if self.use_turbulence:
+            tb, et = self.turbulence, self.emitter_turbulence
+            strength, freq, scroll, octaves = tb.strength, tb.frequency, tb.scroll, tb.octaves
+
+            @ti.func
+            def turbulence(x, v, age, t, i):
+                p = x * freq - ti.Vector([0.0, scroll * freq * t, 0.0])
+                return (strength * et[pem[i]]) * curl_noise(p, octaves)
+
+            available["turbulence"] = turbulence
+        if self.attractor_count:
+            apos, astr, arad, na = (self.attractor_pos, self.attractor_strength, self.attractor_radius,
+                                    self.attractor_count)
+
+            @ti.func
+            def attractors(x, v, age, t, i):
+                a = ti.Vector([0.0, 0.0, 0.0])
+                for k in ti.static(range(na)):
+                    d = apos[k] - x
+                    r = d.norm() + 1e-6
+                    a += astr[k] * (d / r) / (1.0 + (r / arad[k]) ** 2)
+                return a
+
+            available["attractors"] = attractors
+        if self.vortex_count:
+            vpos, vax, vstr, vrad, nv = (self.vortex_pos, self.vortex_axis, self.vortex_strength,
+                                         self.vortex_radius, self.vortex_count)
+
+            @ti.func
+            def vortices(x, v, age, t, i):
+                a = ti.Vector([0.0, 0.0, 0.0])
+                for k in ti.static(range(nv)):
+                    d = x - vpos[k]
+                    rho_v = d - d.dot(vax[k]) * vax[k]  # from the axis, perpendicular to it
+                    rho = rho_v.norm() + 1e-6
+                    q = rho / vrad[k]
+                    a += vstr[k] * (2.0 * q / (1.0 + q * q)) * vax[k].cross(rho_v / rho)
+                return a
+
+            available["vortices"] = vortices
+        terms = tuple(available[n] for n in self.names)
 
         @ti.func
-        def accel(x, v, t, i):
+        def accel(x, v, age, t, i):
             a = ti.Vector([0.0, 0.0, 0.0])
             for k in ti.static(range(len(terms))):
-                a += terms[k](x, v, t, i)
+                a += terms[k](x, v, age, t, i)
             return a
 
         return accel

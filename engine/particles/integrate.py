@@ -1,6 +1,6 @@
 """Particle stepping: the ODE core's steppers fused into one kernel per step.
 
-Each particle's state is y = (x, v) ∈ R⁶ with y' = (v, a(x, v, t)); the particles do not interact,
+Each particle's state is y = (x, age, v, 0) ∈ R⁸ with y' = (v, 1, a(x, v, age, t), 0); the particles do not interact,
 so all stages of a method run in registers inside one parallel loop (PERF-NOTES: one fused RK4
 kernel is ~3× faster than stage kernels). Colliders and ageing run in the same kernel after the
 step. With step doubling, ``attempt`` writes a candidate and returns the max-norm error over live
@@ -15,12 +15,29 @@ NO_FAILURE = 1e30  # sentinel in nonfinite_t: no particle went non-finite (f32 i
 
 
 @ti.func
-def _pack(x, v):
-    return ti.Vector([x[0], x[1], x[2], v[0], v[1], v[2]])
+def _pack(x, age, v):
+    """The ODE state of one particle: q = (x, age), p = (v, 0) — age is integrated (age' = 1)
+    so age-dependent forces (buoyancy cooling) see the age at each stage, not the step's start."""
+    return ti.Vector([x[0], x[1], x[2], age, v[0], v[1], v[2], 0.0])
+
+
+@ti.func
+def _x(y):
+    return ti.Vector([y[0], y[1], y[2]])
+
+
+@ti.func
+def _v(y):
+    return ti.Vector([y[4], y[5], y[6]])
 
 
 class ParticleIntegrator:
-    def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False):
+    def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False,
+                 events: bool = False, contacts: int = 0):
+        """``collide`` is the colliders' reporting function (``make_func(report=True)``; None: no
+        colliders). With ``contacts`` > 0 up to that many contacts per frame are recorded in
+        ``contact_*`` fields (slot, collider, position, normal, impact speed, time); without, the
+        unused report outputs are dead code the compiler drops."""
         S = state
         pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
                                       S.particle_life, S.particle_alive)
@@ -31,12 +48,29 @@ class ParticleIntegrator:
         self.nonfinite_t[None] = NO_FAILURE
         bad_t, err, hits = self.nonfinite_t, self.err, self.hits
         has_colliders = collide is not None
+        record = bool(contacts) and has_colliders
+        self.max_contacts = int(contacts)
+        self.contact_count = ti.field(ti.i32, shape=())
+        cn = max(1, int(contacts))
+        self.contact_slot = c_slot = ti.field(ti.i32, shape=cn)
+        self.contact_collider = c_coll = ti.field(ti.i32, shape=cn)
+        self.contact_pos = c_pos = ti.Vector.field(3, ti.f32, shape=cn)
+        self.contact_normal = c_nrm = ti.Vector.field(3, ti.f32, shape=cn)
+        self.contact_speed = c_spd = ti.field(ti.f32, shape=cn)
+        self.contact_time = c_t = ti.field(ti.f32, shape=cn)
+        c_count, c_max = self.contact_count, int(contacts)
+        event = impact = None
+        if events:
+            event, impact = S.particle_event, S.particle_impact
 
         @ti.func
         def deriv(y, t, i):
-            x = ti.Vector([y[0], y[1], y[2]])
-            v = ti.Vector([y[3], y[4], y[5]])
-            return _pack(v, accel(x, v, t, i))
+            v = _v(y)
+            return _pack(v, 1.0, accel(_x(y), v, y[3], t, i))
+
+        @ti.func
+        def deriv_q(y, t, i):  # (x, age)' = (v, 1): all the drift of a partitioned method needs
+            return _pack(_v(y), 1.0, ti.Vector([0.0, 0.0, 0.0]))
 
         @ti.func
         def finish(i, x, v, t_end, h):
@@ -44,7 +78,17 @@ class ParticleIntegrator:
             if is_finite(x.sum() + v.sum()):
                 killed = 0
                 if ti.static(has_colliders):
-                    nx, nv, k, nh = collide(x, v)
+                    nx, nv, k, nh, which, nrm, spd = collide(x, v)
+                    if ti.static(record):
+                        if nh > 0:
+                            c = ti.atomic_add(c_count[None], 1)  # order fixed later by (time, slot)
+                            if c < c_max:
+                                c_slot[c], c_coll[c], c_pos[c] = i, which, nx
+                                c_nrm[c], c_spd[c], c_t[c] = nrm, spd, t_end
+                    if ti.static(events):
+                        if nh > 0:
+                            event[i] |= 2
+                            impact[i] = (nv - v).norm()
                     x, v, killed = nx, nv, k
                     if nh > 0:
                         ti.atomic_add(hits[None], nh)
@@ -54,48 +98,56 @@ class ParticleIntegrator:
                 age[i] = a
                 if a >= life[i] or killed != 0:
                     alive[i] = 0
+                    if ti.static(events):
+                        event[i] |= 1
             else:
                 ti.atomic_min(bad_t[None], t_end)
                 alive[i] = 0
 
-        step = make_step(method, deriv, 6, ti.f32)
-
-        @ti.func
-        def advance_one(i, t, h):
-            """One step of the method for slot i, then collide and age it."""
-            y = step(_pack(pos[i], vel[i]), t, h, i)
-            finish(i, ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[3], y[4], y[5]]), t + h, h)
+        step = make_step(method, deriv, 8, ti.f32, fq=deriv_q)
 
         @ti.kernel
         def step_fixed(t: ti.f32, h: ti.f32):
             for i in range(cap):
                 if alive[i] != 0:
-                    advance_one(i, t, h)
+                    a0 = ti.min(age[i], 0.0)  # < 0: born a0 seconds into this step
+                    if -a0 < h:
+                        y = step(_pack(pos[i], ti.max(age[i], 0.0), vel[i]), t - a0, h + a0, i)
+                        finish(i, _x(y), _v(y), t + h, h)
+                    else:
+                        age[i] += h  # not born yet
 
         self.step_fixed = step_fixed
-        self.advance_one = advance_one
 
         if adaptive:
             cpos, cvel = S.cand_pos, S.cand_vel
-            dstep = doubling_step(method, deriv, 6, ti.f32, extrapolate)
+            dstep = doubling_step(method, deriv, 8, ti.f32, extrapolate, fq=deriv_q)
 
             @ti.kernel
             def attempt(t: ti.f32, h: ti.f32, atol: ti.f32, rtol: ti.f32) -> ti.f32:
                 err[None] = 0.0
                 for i in range(cap):
                     if alive[i] != 0:
-                        y0 = _pack(pos[i], vel[i])
-                        y2, est = dstep(y0, t, h, i)
-                        cpos[i] = ti.Vector([y2[0], y2[1], y2[2]])
-                        cvel[i] = ti.Vector([y2[3], y2[4], y2[5]])
-                        ti.atomic_max(err[None], scaled_error(y0, y2, est, atol, rtol))
+                        a0 = ti.min(age[i], 0.0)
+                        if -a0 < h:
+                            y0 = _pack(pos[i], ti.max(age[i], 0.0), vel[i])
+                            y2, est = dstep(y0, t - a0, h + a0, i)
+                            cpos[i] = _x(y2)
+                            cvel[i] = _v(y2)
+                            ti.atomic_max(err[None], scaled_error(y0, y2, est, atol, rtol))
+                        else:
+                            cpos[i] = pos[i]
+                            cvel[i] = vel[i]
                 return err[None]
 
             @ti.kernel
             def commit(t: ti.f32, h: ti.f32):
                 for i in range(cap):
                     if alive[i] != 0:
-                        finish(i, cpos[i], cvel[i], t + h, h)
+                        if age[i] + h > 0:
+                            finish(i, cpos[i], cvel[i], t + h, h)
+                        else:
+                            age[i] += h  # not born yet
 
             self.attempt, self.commit = attempt, commit
 

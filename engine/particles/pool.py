@@ -12,26 +12,12 @@ slots) and needs no Python per-particle loop.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import List
 
 import taichi as ti
 
-
-def emitter_capacity(em, frame_dt: float) -> int:
-    """Slots emitter ``em`` (a config Emitter) can fill: rate × max lifetime (over its emission
-    window) plus the burst particles that can be alive together, plus one frame of slack."""
-    if em.capacity is not None:
-        return int(em.capacity)
-    life = em.lifetime
-    window = math.inf if em.stop is None else max(0.0, em.stop - em.start)
-    cont = em.rate * min(life + frame_dt, window + frame_dt) if em.rate > 0 else 0.0
-    burst = 0
-    for b in em.bursts:
-        overlapping = 1 if b.cycles == 1 else min(b.cycles, math.ceil(life / b.interval) + 1)
-        burst += b.count * overlapping
-    return int(math.ceil(cont)) + burst + 8
+from .capacity import emitter_capacity, pool_sizes  # noqa: F401  (re-exported)
 
 
 @dataclass
@@ -47,12 +33,17 @@ class PoolLayout:
 
     @classmethod
     def for_emitters(cls, emitters, frame_dt: float) -> "PoolLayout":
-        sizes = [emitter_capacity(em, frame_dt) for em in emitters]
+        sizes = pool_sizes(emitters, frame_dt)
         starts, acc = [], 0
         for s in sizes:
             starts.append(acc)
             acc += s
         return cls(starts, sizes)
+
+
+# the per-slot state every pool has (optional ones are listed in ParticleState's docstring)
+PARTICLE_FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_life", "particle_alive",
+                   "particle_emitter", "particle_rand")
 
 
 class ParticleState:
@@ -61,10 +52,11 @@ class ParticleState:
     ``particle_pos`` (vec3 f32, m), ``particle_vel`` (vec3 f32, m/s), ``particle_age`` and
     ``particle_life`` (f32, s), ``particle_alive`` (i32 0/1), ``particle_emitter`` (i32),
     ``particle_rand`` (f32 in [0, 1): per-particle variation for size and colour).
-    With adaptive stepping, ``cand_pos``/``cand_vel`` hold the attempted step (allocated only then).
+    With adaptive stepping, ``cand_pos``/``cand_vel`` hold the attempted step; with sub-emitters,
+    ``particle_event`` and ``particle_impact`` record deaths and collisions (each allocated only then).
     """
 
-    def __init__(self, capacity: int, adaptive: bool):
+    def __init__(self, capacity: int, adaptive: bool, events: bool = False):
         n = max(1, capacity)
         self.capacity = capacity
         self.particle_pos = ti.Vector.field(3, ti.f32, shape=n)
@@ -74,6 +66,9 @@ class ParticleState:
         self.particle_alive = ti.field(ti.i32, shape=n)
         self.particle_emitter = ti.field(ti.i32, shape=n)
         self.particle_rand = ti.field(ti.f32, shape=n)
+        if events:  # sub-emitters: what happened to each particle during the last step
+            self.particle_event = ti.field(ti.i32, shape=n)  # bit 1 died, bit 2 hit a collider
+            self.particle_impact = ti.field(ti.f32, shape=n)  # |Δv| of its last collision, m/s
         if adaptive:
             self.cand_pos = ti.Vector.field(3, ti.f32, shape=n)
             self.cand_vel = ti.Vector.field(3, ti.f32, shape=n)

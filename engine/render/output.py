@@ -18,7 +18,12 @@ FORMATS = ("png", "gif", "mp4")
 
 
 class OutputError(Exception):
-    pass
+    """The output folder cannot be created or written (not a directory, read-only, disk full)."""
+
+
+class OutputRefused(OutputError):
+    """The output folder is usable but the request is not: frames already there without
+    ``--overwrite``, or ``--resume`` on a folder rendered with other settings."""
 
 
 def frame_path(out_dir: str, index: int) -> str:
@@ -37,7 +42,7 @@ def prepare_dir(out_dir: str, overwrite: bool) -> None:
         raise OutputError(f"--out: {out_dir} exists and is not a directory")
     old = existing_outputs(out_dir) if os.path.isdir(out_dir) else []
     if old and not overwrite:
-        raise OutputError(f"--out: {out_dir} already holds {len(old)} rendered file(s); "
+        raise OutputRefused(f"--out: {out_dir} already holds {len(old)} rendered file(s); "
                           f"pass --overwrite to replace them or --out to choose another folder")
     try:
         os.makedirs(out_dir, exist_ok=True)
@@ -78,8 +83,7 @@ class FrameWriter:
             Image.fromarray(img).save(tmp, format="PNG", compress_level=self.compress_level)
             os.replace(tmp, path)
         except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
+            _discard(tmp)
             raise
         self.written.append(path)
 
@@ -115,8 +119,9 @@ class FrameWriter:
     def _raise(self):
         if self._error is not None:
             e = self._error
-            msg = getattr(e, "strerror", None) or str(e)
-            raise OutputError(f"writing frames to {self.out_dir} failed: {e.__class__.__name__}: {msg}")
+            msg = " ".join(str(getattr(e, "strerror", None) or e).split())
+            raise OutputError(f"writing frames to {self.out_dir} failed after {len(self.written)} "
+                              f"whole frame(s): {e.__class__.__name__}: {msg}")
 
     def submit(self, index: int, img: np.ndarray) -> None:
         self._raise()
@@ -133,8 +138,20 @@ class FrameWriter:
             except Exception as e:  # pragma: no cover
                 self._error = self._error or e
             if finished and self._error is None:
-                os.replace(self._movie_tmp, self._movie_path)
-                self.written.append(self._movie_path)
-            elif os.path.exists(self._movie_tmp):
-                os.remove(self._movie_tmp)
+                try:
+                    os.replace(self._movie_tmp, self._movie_path)
+                    self.written.append(self._movie_path)
+                except OSError as e:
+                    self._error = e
+                    _discard(self._movie_tmp)
+            else:
+                _discard(self._movie_tmp)
         self._raise()
+
+
+def _discard(path: str) -> None:
+    """Remove a temporary file if it is there; a failure here must not hide the first error."""
+    try:
+        os.remove(path)
+    except OSError:
+        pass

@@ -12,7 +12,8 @@ Passes, each one kernel:
      0.38 s). Its cost — colour is an average, not exact "over" — is invisible in soft media.
    The loop is serialised: float atomics from several threads make sums depend on thread timing,
    and PERF-NOTES measured the serial loop as faster anyway (7.1 vs 14.3 ms for 1M splats).
-3. ``resolve``: composite (background·T + OIT colour·(1 − T) + additive light), exposure, the ACES
+3. ``resolve``: composite (background·T + OIT colour·shade·(1 − T) + additive light, where
+   shade darkens thick media with their optical depth), exposure, the ACES
    filmic fit (Narkowicz 2015), sRGB encoding to 8 bits.
 """
 # (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
@@ -28,7 +29,11 @@ vec3 = ti.types.vector(3, ti.f32)
 
 
 class Renderer:
-    def __init__(self, state, emitter_configs, colliders, render_cfg, width=None, height=None):
+    """Draws one scene. ``state``/``emitter_configs`` may be None/empty (a soft-body scene:
+    no splat kernel is built); ``bodies`` are drawn as meshes and lines (engine.render.mesh)."""
+
+    def __init__(self, state, emitter_configs, colliders, render_cfg, width=None, height=None,
+                 bodies=()):
         self.W = int(width or render_cfg.width)
         self.H = int(height or render_cfg.height)
         W, H = self.W, self.H
@@ -41,6 +46,20 @@ class Renderer:
         self.bg = ti.Vector.field(3, ti.f32, shape=(H, W))
         self.depth = ti.field(ti.f32, shape=(H, W))
         E = len(emitter_configs)
+        self.has_particles = state is not None and E > 0
+        self.uses_alpha = self.has_particles and any(c.blend == "alpha" for c in emitter_configs)
+        self.uses_additive = self.has_particles and any(c.blend == "additive" for c in emitter_configs)
+        self._build_background(colliders)
+        if self.has_particles:
+            self._build_particles(state, emitter_configs)
+        self.mesh = None
+        if bodies:
+            from .mesh import MeshLayer
+
+            self.mesh = MeshLayer(bodies, self)
+
+    def _build_particles(self, state, emitter_configs):
+        E = len(emitter_configs)
         self.color = Curves([e.color for e in emitter_configs], 3)
         self.alpha = Curves([e.alpha for e in emitter_configs], 1)
         self.size = Curves([e.size for e in emitter_configs], 1)
@@ -51,14 +70,10 @@ class Renderer:
             self.emitter_additive[e] = int(c.blend == "additive")
             self.emitter_streak[e] = c.streak
             self.emitter_size_rand[e] = c.size_randomness
-        self.uses_alpha = any(c.blend == "alpha" for c in emitter_configs)
-        self.uses_additive = any(c.blend == "additive" for c in emitter_configs)
-        self._build(state, colliders)
-
-    def _build(self, S, colliders):
-        W, H, cfg = self.W, self.H, self.cfg
-        image, light, oit_rgb, oit_w, oit_logT, bg, depth = (
-            self.image, self.light, self.oit_rgb, self.oit_w, self.oit_logT, self.bg, self.depth)
+        W, H = self.W, self.H
+        light, oit_rgb, oit_w, oit_logT, depth = (
+            self.light, self.oit_rgb, self.oit_w, self.oit_logT, self.depth)
+        S = state
         pos, vel, age, life, alive, pem, prand = (
             S.particle_pos, S.particle_vel, S.particle_age, S.particle_life, S.particle_alive,
             S.particle_emitter, S.particle_rand)
@@ -66,6 +81,89 @@ class Renderer:
         color_at, alpha_at, size_at = (self.color.make_func(), self.alpha.make_func(),
                                        self.size.make_func())
         additive, streak, size_rand = self.emitter_additive, self.emitter_streak, self.emitter_size_rand
+        uses_alpha, uses_add = self.uses_alpha, self.uses_additive
+        aspect = W / H
+
+        @ti.func
+        def deposit(cx, cy, rad, z, col, a, is_add, energy, soft):
+            """A soft disc of radius rad px at (cx, cy): kernel (1 − d²/r²)². Depth-tested as a
+            soft particle (Lorach 2007): it fades over ``soft`` metres in front of an opaque
+            surface instead of being cut by it, so a flame on the ground has no hard edge."""
+            x0 = ti.max(0, ti.cast(ti.floor(cx - rad), ti.i32))
+            x1 = ti.min(W - 1, ti.cast(ti.floor(cx + rad), ti.i32))
+            y0 = ti.max(0, ti.cast(ti.floor(cy - rad), ti.i32))
+            y1 = ti.min(H - 1, ti.cast(ti.floor(cy + rad), ti.i32))
+            inv_r2 = 1.0 / (rad * rad)
+            for yy in range(y0, y1 + 1):
+                for xx in range(x0, x1 + 1):
+                    dx = xx + 0.5 - cx
+                    dy = yy + 0.5 - cy
+                    q = 1.0 - (dx * dx + dy * dy) * inv_r2
+                    gap = depth[yy, xx] - z
+                    if q > 0 and gap > 0:
+                        w = q * q * energy * ti.min(1.0, gap / soft)
+                        if ti.static(uses_add):
+                            if is_add:
+                                light[yy, xx] += col * (a * w)
+                        if ti.static(uses_alpha):
+                            if not is_add:
+                                aa = ti.min(0.98, a * w)
+                                # McGuire & Bavoil (2013) eq. 10 depth weight
+                                wz = aa * ti.max(1e-2, ti.min(3e3, 10.0 / (1e-5 + ti.pow(z / 5.0, 2.0)
+                                                                         + ti.pow(z / 200.0, 6.0))))
+                                oit_rgb[yy, xx] += col * wz
+                                oit_w[yy, xx] += wz
+                                oit_logT[yy, xx] += ti.log(1.0 - aa)
+
+        @ti.kernel
+        def splat(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
+            half_h = 0.5 * H
+            ti.loop_config(serialize=True)
+            for i in range(cap):
+                if alive[i] != 0 and age[i] >= 0.0:  # (negative age: not born yet)
+                    e = pem[i]
+                    tl = ti.min(1.0, age[i] / life[i])
+                    dpos = pos[i] - o
+                    z = dpos.dot(f)
+                    if z > 0.05:
+                        col = color_at(e, tl)
+                        a = alpha_at(e, tl)[0]
+                        sz = size_at(e, tl)[0] * (1.0 + size_rand[e] * (2.0 * prand[i] - 1.0))
+                        scale = half_h / (z * th)
+                        cx = dpos.dot(r) * scale + 0.5 * W
+                        cy = 0.5 * H - dpos.dot(u) * scale
+                        rad = 0.5 * sz * scale
+                        energy = 1.0
+                        if rad < 0.75:  # sub-pixel: draw at 0.75 px, keep the light it carries
+                            energy = (rad / 0.75) ** 2
+                            rad = 0.75
+                        if rad > MAX_SPLAT_RADIUS:
+                            rad = MAX_SPLAT_RADIUS
+                        is_add = additive[e] != 0
+                        soft = ti.max(0.5 * sz, 1e-3)
+                        st = streak[e]
+                        if st > 0:
+                            tail = pos[i] - vel[i] * st - o
+                            zt = ti.max(tail.dot(f), 0.05)
+                            st_scale = half_h / (zt * th)
+                            tx = tail.dot(r) * st_scale + 0.5 * W
+                            ty = 0.5 * H - tail.dot(u) * st_scale
+                            length = ti.sqrt((tx - cx) ** 2 + (ty - cy) ** 2)
+                            n = ti.min(32, ti.cast(length / ti.max(0.5 * rad, 0.5), ti.i32) + 1)
+                            for s in range(n):
+                                a_s = (s + 0.5) / n
+                                deposit(cx + a_s * (tx - cx), cy + a_s * (ty - cy), rad, z, col,
+                                        a * (1.0 - 0.6 * a_s), is_add, energy * 2.0 / n, soft)
+                        else:
+                            deposit(cx, cy, rad, z, col, a, is_add, energy, soft)
+
+        self._splat = splat
+
+    def _build_background(self, colliders):
+        W, H, cfg = self.W, self.H, self.cfg
+        image, light, oit_rgb, oit_w, oit_logT, bg, depth = (
+            self.image, self.light, self.oit_rgb, self.oit_w, self.oit_logT, self.bg, self.depth)
+        uses_alpha, uses_add = self.uses_alpha, self.uses_additive
         bgc = tuple(float(c) for c in cfg.background)
         show = cfg.show_colliders and colliders is not None
         vis = [k for k, s in enumerate(colliders.specs) if s.visible] if show else []
@@ -76,7 +174,7 @@ class Renderer:
             cpt, cnr, crad = colliders.collider_point, colliders.collider_normal, colliders.collider_radius
         else:
             cpt = cnr = crad = None
-        uses_alpha, uses_add = self.uses_alpha, self.uses_additive
+        shading = float(cfg.density_shading)
         aspect = W / H
 
         @ti.func
@@ -146,75 +244,6 @@ class Renderer:
                 oit_logT[py, px] = 0.0
 
         @ti.func
-        def deposit(cx, cy, rad, z, col, a, is_add, energy):
-            """A soft disc of radius rad px at (cx, cy): kernel (1 − d²/r²)², depth-tested."""
-            x0 = ti.max(0, ti.cast(ti.floor(cx - rad), ti.i32))
-            x1 = ti.min(W - 1, ti.cast(ti.floor(cx + rad), ti.i32))
-            y0 = ti.max(0, ti.cast(ti.floor(cy - rad), ti.i32))
-            y1 = ti.min(H - 1, ti.cast(ti.floor(cy + rad), ti.i32))
-            inv_r2 = 1.0 / (rad * rad)
-            for yy in range(y0, y1 + 1):
-                for xx in range(x0, x1 + 1):
-                    dx = xx + 0.5 - cx
-                    dy = yy + 0.5 - cy
-                    q = 1.0 - (dx * dx + dy * dy) * inv_r2
-                    if q > 0 and z < depth[yy, xx]:
-                        w = q * q * energy
-                        if ti.static(uses_add):
-                            if is_add:
-                                light[yy, xx] += col * (a * w)
-                        if ti.static(uses_alpha):
-                            if not is_add:
-                                aa = ti.min(0.98, a * w)
-                                # McGuire & Bavoil (2013) eq. 10 depth weight
-                                wz = aa * ti.max(1e-2, ti.min(3e3, 10.0 / (1e-5 + ti.pow(z / 5.0, 2.0)
-                                                                         + ti.pow(z / 200.0, 6.0))))
-                                oit_rgb[yy, xx] += col * wz
-                                oit_w[yy, xx] += wz
-                                oit_logT[yy, xx] += ti.log(1.0 - aa)
-
-        @ti.kernel
-        def splat(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
-            half_h = 0.5 * H
-            ti.loop_config(serialize=True)
-            for i in range(cap):
-                if alive[i] != 0:
-                    e = pem[i]
-                    tl = ti.min(1.0, age[i] / life[i])
-                    dpos = pos[i] - o
-                    z = dpos.dot(f)
-                    if z > 0.05:
-                        col = color_at(e, tl)
-                        a = alpha_at(e, tl)[0]
-                        sz = size_at(e, tl)[0] * (1.0 + size_rand[e] * (2.0 * prand[i] - 1.0))
-                        scale = half_h / (z * th)
-                        cx = dpos.dot(r) * scale + 0.5 * W
-                        cy = 0.5 * H - dpos.dot(u) * scale
-                        rad = 0.5 * sz * scale
-                        energy = 1.0
-                        if rad < 0.75:  # sub-pixel: draw at 0.75 px, keep the light it carries
-                            energy = (rad / 0.75) ** 2
-                            rad = 0.75
-                        if rad > MAX_SPLAT_RADIUS:
-                            rad = MAX_SPLAT_RADIUS
-                        is_add = additive[e] != 0
-                        st = streak[e]
-                        if st > 0:
-                            tail = pos[i] - vel[i] * st - o
-                            zt = ti.max(tail.dot(f), 0.05)
-                            st_scale = half_h / (zt * th)
-                            tx = tail.dot(r) * st_scale + 0.5 * W
-                            ty = 0.5 * H - tail.dot(u) * st_scale
-                            length = ti.sqrt((tx - cx) ** 2 + (ty - cy) ** 2)
-                            n = ti.min(32, ti.cast(length / ti.max(0.5 * rad, 0.5), ti.i32) + 1)
-                            for s in range(n):
-                                a_s = (s + 0.5) / n
-                                deposit(cx + a_s * (tx - cx), cy + a_s * (ty - cy), rad, z, col,
-                                        a * (1.0 - 0.6 * a_s), is_add, energy * 2.0 / n)
-                        else:
-                            deposit(cx, cy, rad, z, col, a, is_add, energy)
-
-        @ti.func
         def aces(x):
             return ti.math.clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
 
@@ -227,17 +256,21 @@ class Renderer:
             for py, px in bg:
                 c = bg[py, px]
                 if ti.static(uses_alpha):
-                    T = ti.exp(oit_logT[py, px])
+                    tau = -oit_logT[py, px]  # optical depth through the medium at this pixel
+                    T = ti.exp(-tau)
                     wsum = oit_w[py, px]
                     if wsum > 1e-8:
-                        c = c * T + (oit_rgb[py, px] / wsum) * (1.0 - T)
+                        # thick smoke is darker inside: light reaching the core is attenuated
+                        # (a one-parameter stand-in for self-shadowing, order independent)
+                        shade = 0.25 + 0.75 * ti.exp(-shading * tau)
+                        c = c * T + (oit_rgb[py, px] / wsum) * shade * (1.0 - T)
                 if ti.static(uses_add):
                     c += light[py, px]
                 out = srgb(aces(c * exposure))
                 for ch in ti.static(range(3)):
                     image[py, px, ch] = ti.cast(ti.min(255.0, out[ch] * 255.0 + 0.5), ti.u8)
 
-        self._background, self._splat, self._resolve = background, splat, resolve
+        self._background, self._resolve = background, resolve
 
     def render(self, camera, exposure=None) -> np.ndarray:
         """Render the pool as seen by ``camera``; returns an (H, W, 3) uint8 sRGB image."""
@@ -245,6 +278,10 @@ class Renderer:
         th = camera.tan_half
         args = (p.tolist(), f.tolist(), r.tolist(), u.tolist(), th)
         self._background(*args)
-        self._splat(*args)
+        if self.mesh is not None:
+            self.mesh.update()
+            self.mesh.draw(args)
+        if self.has_particles:
+            self._splat(*args)
         self._resolve(self.cfg.exposure if exposure is None else exposure)
         return self.image.to_numpy()

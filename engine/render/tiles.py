@@ -61,6 +61,7 @@ class TiledSplat:
         self.spr_geom = ti.Vector.field(4, ti.f32, shape=n)  # cx, cy, rad, z
         self.spr_look = ti.Vector.field(4, ti.f32, shape=n)  # r, g, b, alpha
         self.spr_tail = ti.Vector.field(4, ti.f32, shape=n)  # energy, tail x, tail y, OIT depth weight
+        self.spr_soft = ti.field(ti.f32, shape=n)  # soft-particle fade distance (m)
         self.spr_info = ti.Vector.field(2, ti.i32, shape=n)  # sub-deposits (0: not drawn), additive
         self.spr_tiles = ti.Vector.field(4, ti.i32, shape=n)  # tile x0, y0, x1, y1 (inclusive)
         self.hist = ti.field(ti.i32, shape=(CHUNKS, self.tiles))
@@ -87,8 +88,8 @@ class TiledSplat:
         additive, streak, size_rand = look.additive, look.streak, look.size_rand
         uses_alpha, uses_add = look.uses_alpha, look.uses_additive
         light, oit_rgb, oit_w, oit_logT, depth = targets
-        geom, slook, tail, info, tiles = (self.spr_geom, self.spr_look, self.spr_tail,
-                                          self.spr_info, self.spr_tiles)
+        geom, slook, tail, info, tiles, softf = (self.spr_geom, self.spr_look, self.spr_tail,
+                                                 self.spr_info, self.spr_tiles, self.spr_soft)
         hist, tcount, tstart = self.hist, self.tile_count, self.tile_start
 
         @ti.kernel
@@ -96,7 +97,7 @@ class TiledSplat:
             half_h = 0.5 * H
             for i in range(cap):
                 nsub = 0
-                if alive[i] != 0:
+                if alive[i] != 0 and age[i] >= 0.0:  # (negative age: not born yet)
                     e = pem[i]
                     tl = ti.min(1.0, age[i] / life[i])
                     dpos = pos[i] - o
@@ -145,6 +146,7 @@ class TiledSplat:
                             tail[i] = ti.Vector([energy, tx, ty, wz])
                             tiles[i] = ti.Vector([x0 // TILE, y0 // TILE, x1 // TILE, y1 // TILE])
                             info[i] = ti.Vector([0, ti.cast(additive[e] != 0, ti.i32)])
+                            softf[i] = ti.max(0.5 * sz, 1e-3)
                         else:
                             nsub = 0
                 info[i][0] = nsub  # > 0: one disc; < 0: a streak of −nsub discs
@@ -196,19 +198,21 @@ class TiledSplat:
                                 pairs[tstart[t] + hist[c, t]] = ti.Vector([
                                     g[0], g[1], g[2], g[3], lk[0], lk[1], lk[2], lk[3],
                                     tl[0], tl[1], tl[2], tl[3], ti.cast(nf[0], ti.f32),
-                                    ti.cast(nf[1], ti.f32), 0.0, 0.0])
+                                    ti.cast(nf[1], ti.f32), softf[i], 0.0])
                                 hist[c, t] += 1
 
         @ti.func
-        def pixel(xx, yy, inside, cx, cy, inv_r2, z, col, a, is_add, energy, wzf):
-            """One pixel of a soft disc, (1 − d²/r²)², depth-tested. Branch-free: a pixel outside
+        def pixel(xx, yy, inside, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft):
+            """One pixel of a soft disc, (1 − d²/r²)², depth-tested as a soft particle (fading over
+            ``soft`` metres in front of an opaque surface, as raster.py). Branch-free: a pixel outside
             the disc (or ``inside`` false: a padding lane, its index clamped onto a real pixel)
             adds exactly zero. Plain load + store, not ``+=``: one thread owns the tile, and a
             ``+=`` on a field in a parallel loop compiles to a float atomic."""
             dx = xx + 0.5 - cx
             dy = yy + 0.5 - cy
             q = 1.0 - (dx * dx + dy * dy) * inv_r2
-            w = ti.select(inside and q > 0 and z < depth[yy, xx], q * q * energy, 0.0)
+            gap = depth[yy, xx] - z
+            w = ti.select(inside and q > 0 and gap > 0, q * q * energy * ti.min(1.0, gap / soft), 0.0)
             if ti.static(uses_add):
                 if is_add:
                     light[yy, xx] = light[yy, xx] + col * (a * w)
@@ -221,16 +225,17 @@ class TiledSplat:
                     oit_logT[yy, xx] = oit_logT[yy, xx] + ti.log(1.0 - aa)
 
         @ti.func
-        def block(B: ti.template(), bx, by, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf):
+        def block(B: ti.template(), bx, by, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf,
+                  soft):
             """A B×B pixel block from (bx, by), unrolled at compile time, clipped to (x1, y1)."""
             for dy in ti.static(range(B)):
                 for dx in ti.static(range(B)):
                     inside = bx + dx <= x1 and by + dy <= y1
                     pixel(ti.min(bx + dx, x1), ti.min(by + dy, y1), inside, cx, cy, inv_r2, z, col,
-                          a, is_add, energy, wzf)
+                          a, is_add, energy, wzf, soft)
 
         @ti.func
-        def deposit(px0, py0, px1, py1, cx, cy, rad, z, col, a, is_add, energy, wzf):
+        def deposit(px0, py0, px1, py1, cx, cy, rad, z, col, a, is_add, energy, wzf, soft):
             """The serial splat's soft disc limited to one tile's pixels [px0, px1] × [py0, py1].
             Taichi's dynamic inner loops cost more than the pixel work of the 1–3 px sprites of a
             dense pool, so a disc that fits a 2×2 or 4×4 block runs no loop at all. Each pixel
@@ -243,16 +248,16 @@ class TiledSplat:
                 inv_r2 = 1.0 / (rad * rad)
                 span = ti.max(x1 - x0, y1 - y0)
                 if span < 2:
-                    block(2, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf)
+                    block(2, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft)
                 elif span < 3:
-                    block(3, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf)
+                    block(3, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft)
                 elif span < 4:
-                    block(4, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf)
+                    block(4, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft)
                 else:
                     for jy in range((y1 - y0 + 4) // 4):
                         for jx in range((x1 - x0 + 4) // 4):
                             block(4, x0 + 4 * jx, y0 + 4 * jy, x1, y1, cx, cy, inv_r2, z, col, a,
-                                  is_add, energy, wzf)
+                                  is_add, energy, wzf, soft)
 
         @ti.kernel
         def accumulate(pairs: ti.template()):
@@ -268,6 +273,7 @@ class TiledSplat:
                     tl = ti.Vector([rec[8], rec[9], rec[10], rec[11]])
                     nsub = ti.cast(rec[12], ti.i32)
                     is_add = rec[13] != 0.0
+                    soft = rec[14]
                     col = ti.Vector([lk[0], lk[1], lk[2]])
                     n = ti.abs(nsub)
                     for s in range(n):  # a streak: n discs along it, fading; else one disc
@@ -278,7 +284,8 @@ class TiledSplat:
                             cy = g[1] + a_s * (tl[2] - g[1])
                             a = lk[3] * (1.0 - 0.6 * a_s)
                             energy = tl[0] * 2.0 / n
-                        deposit(px0, py0, px1, py1, cx, cy, g[2], g[3], col, a, is_add, energy, tl[3])
+                        deposit(px0, py0, px1, py1, cx, cy, g[2], g[3], col, a, is_add, energy, tl[3],
+                                soft)
 
         self._sprites, self._count, self._offsets, self._starts = sprites, count, offsets, starts
         self._scatter, self._accumulate = scatter, accumulate

@@ -1,0 +1,91 @@
+"""Soft bodies in a scene: config → topology → :class:`~engine.springs.SpringSystem`."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .colliders import Colliders
+from .paths import sample_path
+from .springs import SpringSystem, chain, cloth, hair, jelly, line_roots, scalp_roots
+from .springs.topology import STRUCTURAL
+
+
+def build_topology(b):
+    """The spring network a config Body describes."""
+    kw = dict(mass=b.mass, ks=b.stiffness, kd=b.damping)
+    if b.type == "chain":
+        bend = {} if b.bend_stiffness is None else dict(bend_ks=b.bend_stiffness, bend_kd=b.damping)
+        return chain(b.segments + 1, start=b.position, length=b.length, direction=b.direction,
+                     pin_start=b.pins != "none", **kw, **bend)
+    if b.type == "hair":
+        if b.roots == "scalp":
+            roots, normals = scalp_roots(b.position, b.radius, b.strands, math.radians(b.cap_angle))
+        else:
+            roots, normals = line_roots(b.position, b.line_end, b.strands), b.direction
+        bend = 0.1 * b.stiffness if b.bend_stiffness is None else b.bend_stiffness
+        return hair(roots, normals, length=b.length, segments=b.segments, bend_ks=bend,
+                    bend_kd=b.damping, **kw)
+    if b.type == "cloth":
+        pin = b.pins if isinstance(b.pins, list) else {"start": "none"}.get(b.pins, b.pins)
+        return cloth(b.resolution[0], b.resolution[1], size=b.size, origin=b.position, plane=b.plane,
+                     bend_ks=b.bend_stiffness, pin=pin, **kw)
+    pinned = b.pins if isinstance(b.pins, list) else []
+    return jelly(*b.resolution, size=b.size, origin=b.position, pinned=pinned, **kw)
+
+
+def _thicken(spec, d):
+    s = dataclasses.replace(spec)
+    if s.kind == "sphere":
+        s.radius = spec.radius + d
+    else:
+        n = np.asarray(spec.normal, np.float64)
+        shift = d * n / np.linalg.norm(n)
+        s.point = tuple(np.asarray(spec.point, np.float64) + shift)
+        s.path = [(t, tuple(np.asarray(p, np.float64) + shift)) for t, p in spec.path]
+    return s
+
+
+class Body:
+    """One soft body of a scene: its spring system, its own colliders (same specs as the scene's:
+    a moving collider infers its velocity from its own updates) and what the renderer draws."""
+
+    def __init__(self, cfg, collider_specs, gravity, default_integrator):
+        self.cfg = cfg
+        self.topology = build_topology(cfg)
+        n = self.topology.node_count
+        bad = [p for p in (cfg.pins if isinstance(cfg.pins, list) else []) if p >= n]
+        if bad:
+            raise ValueError(f"pins: node {bad[0]} does not exist (the body has {n} nodes)")
+        # nodes keep `thickness` from every surface: flat triangles between nodes resting on a
+        # sphere would otherwise cut into it (a chord lies inside the circle)
+        self.colliders = Colliders([_thicken(s, cfg.thickness) for s in collider_specs]) \
+            if collider_specs else None
+        integrator = cfg.integrator or default_integrator
+        self.system = SpringSystem(self.topology, colliders=self.colliders, gravity=tuple(gravity),
+                                   integrator=integrator, substeps=cfg.substeps,
+                                   xpbd_iterations=cfg.iterations, max_stretch=cfg.max_stretch)
+        self.pinned = np.array(self.topology.pinned, np.int64)
+        self.pin_home = self.topology.positions[self.pinned].copy() if len(self.pinned) else None
+        self.released = False
+        self.triangles = self.topology.triangles if cfg.type in ("cloth", "jelly") else np.zeros((0, 3), np.int32)
+        self.lines = (self.system.lines((STRUCTURAL,)) if cfg.type in ("chain", "hair")
+                      else np.zeros((0, 2), np.int32))
+
+    def step(self, t0: float, dt: float) -> None:
+        """Advance from t0 by dt: pins follow their path, let go at ``release_at``."""
+        c = self.cfg
+        if c.release_at is not None and not self.released and t0 + dt > c.release_at:
+            for node in self.pinned:
+                self.system.release(int(node))
+            self.released = True
+        if c.pin_path and not self.released and len(self.pinned):
+            offset = sample_path([(k.time, k.position) for k in c.pin_path], t0 + dt, (0, 0, 0)) \
+                - np.asarray(c.pin_path[0].position, np.float64)
+            for node, home in zip(self.pinned, self.pin_home):
+                self.system.set_pin_target(int(node), home + offset)
+        self.system.step(dt)
+
+    def positions(self) -> np.ndarray:
+        return self.system.positions()

@@ -1,0 +1,105 @@
+"""``particles chart``: accuracy against cost, stability limits and energy drift, as PNG + CSV.
+
+:func:`run_charts` writes, under ``out_dir``:
+
+* ``workprec_<problem>.csv/.png`` — work–precision diagrams (error at T against f-evaluations and
+  wall time) for projectile_drag, damped_spring, lotka-volterra and kepler;
+* ``stability.csv/.png`` — largest stable h against spring stiffness, measured and predicted;
+* ``energy_drift.csv/.png`` — relative energy error over a long fixed-step run.
+
+Needs the ``chart`` extra (matplotlib, scipy): ``pip install -e ".[chart]"``.
+"""
+import argparse
+import os
+import sys
+from typing import Iterable, List, Optional, Union
+
+CHARTS = ("workprec", "stability", "energy")
+# NUMERICS.md's work–precision figures, drawn over the matching charts as × markers
+_NUMERICS_REFS = {
+    "lotka-volterra": [
+        ("NUMERICS.md: RK4 doubling+extrap", "tab:cyan",
+         [(571, 1.4e-4), (1169, 1.4e-6), (2757, 1.7e-8), (10888, 1.4e-11)]),
+        ("NUMERICS.md: scipy RK45", "0.45", [(194, 2.3e-2), (446, 2.2e-4), (932, 1.1e-6), (3344, 1.5e-10)]),
+        ("NUMERICS.md: scipy DOP853", "black", [(326, 7.1e-4), (518, 1.8e-5), (830, 2.6e-7), (1658, 1.1e-10)]),
+    ],
+    "kepler": [
+        ("NUMERICS.md: RK4 step doubling", "tab:blue", [(2840, 1e-5)]),
+        ("NUMERICS.md: RK4 fixed h", "tab:blue", [(64000, 3.7e-6)]),
+    ],
+}
+
+
+def _selection(which) -> List[str]:
+    from .workprec import CASES
+
+    allowed = list(CHARTS) + list(CASES)
+    if which is None:
+        return allowed[: len(CHARTS)]
+    names = [which] if isinstance(which, str) else list(which)
+    bad = [n for n in names if n not in allowed]
+    if bad:
+        raise ValueError(f"which: unknown chart {bad[0]!r}; allowed: {', '.join(allowed)}")
+    return names
+
+
+def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
+               which: Optional[Union[str, Iterable[str]]] = None) -> List[str]:
+    """Compute and write the charts; return the paths written (CSV and PNG).
+
+    which: None for all, or names among ``workprec``, ``stability``, ``energy`` and the
+    work–precision problem names (``kepler`` …) for one problem's diagram only.
+    quick: coarser sweeps and shorter runs (well under a minute in total), for tests.
+    """
+    from . import plot
+    from .workprec import CASES, FIELDS, T_LABEL, require_scipy, work_precision
+
+    plot.require_matplotlib()
+    require_scipy()
+    names = _selection(which)
+    os.makedirs(out_dir, exist_ok=True)
+    written: List[str] = []
+    problems = [n for n in CASES if "workprec" in names or n in names]
+    for name in problems:
+        rows = work_precision(name, quick=quick)
+        case = CASES[name]
+        T = T_LABEL.get(name, f"T = {case.problem.t_span[1]:g}")
+        base = os.path.join(out_dir, f"workprec_{name}")
+        written.append(plot.write_csv(base + ".csv", rows, FIELDS))
+        title = (f"Work–precision, {name} ({T}): fixed h for every method, step doubling over "
+                 f"tol = rtol (atol = tol·1e-3), scipy solve_ivp as anchor")
+        written.append(plot.work_precision_png(base + ".png", rows, title, _NUMERICS_REFS.get(name, ())))
+    if "stability" in names:
+        from .stability import NUMERICS_TABLE, stability_rows
+
+        rows = stability_rows(quick=quick)
+        base = os.path.join(out_dir, "stability")
+        written.append(plot.write_csv(base + ".csv", rows, list(rows[0])))
+        written.append(plot.stability_png(base + ".png", rows, NUMERICS_TABLE))
+    if "energy" in names:
+        from .energy import H, TITLES, energy_drift
+
+        rows = energy_drift(quick=quick)
+        base = os.path.join(out_dir, "energy_drift")
+        written.append(plot.write_csv(base + ".csv", rows, list(rows[0])))
+        written.append(plot.energy_png(base + ".png", rows, H, TITLES))
+    return written
+
+
+def main(argv=None) -> int:
+    """Manual runs: ``python -m engine.charts [--out DIR] [--quick] [--only NAME]``."""
+    ap = argparse.ArgumentParser(prog="python -m engine.charts", description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default=os.path.join("renders", "charts"))
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", action="append", default=None, metavar="NAME")
+    args = ap.parse_args(argv)
+    try:
+        for p in run_charts(args.out, quick=args.quick, which=args.only):
+            print(p)
+    except (ValueError, ImportError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+__all__ = ["run_charts", "main", "CHARTS"]

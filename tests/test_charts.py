@@ -1,0 +1,109 @@
+"""`particles chart` in quick mode: files written, and the work–precision data behave as theory says."""
+import csv
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+pytest.importorskip("scipy")
+
+from engine.charts import run_charts  # noqa: E402
+from engine.charts.workprec import FIELDS, fixed_slope  # noqa: E402
+from engine.ode import solve  # noqa: E402
+from engine.ode.problems import DAMPED_SPRING  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def quick_charts(tmp_path_factory):
+    out = tmp_path_factory.mktemp("charts")
+    return out, run_charts(out, quick=True)
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        for k in ("h_or_tol", "wall_s", "error"):
+            r[k] = float(r[k])
+        r["nfev"] = int(r["nfev"])
+    return rows
+
+
+def test_quick_run_writes_every_csv_and_png(quick_charts):
+    out, paths = quick_charts
+    names = {p.split("/")[-1] for p in paths}
+    for stem in ("workprec_projectile_drag", "workprec_damped_spring", "workprec_lotka-volterra",
+                 "workprec_kepler", "stability", "energy_drift"):
+        assert {stem + ".csv", stem + ".png"} <= names
+    for p in paths:
+        with open(p, "rb") as fh:
+            head = fh.read(8)
+        if p.endswith(".png"):
+            assert head == b"\x89PNG\r\n\x1a\n"
+    with open(out / "workprec_kepler.csv") as fh:
+        assert fh.readline().strip().split(",") == FIELDS
+
+
+def test_fixed_step_slopes_on_drag(quick_charts):
+    out, _ = quick_charts
+    rows = _rows(out / "workprec_projectile_drag.csv")
+    assert fixed_slope(rows, "rk4") == pytest.approx(-4.0, abs=0.25)
+    assert fixed_slope(rows, "euler") == pytest.approx(-1.0, abs=0.1)
+    assert fixed_slope(rows, "midpoint") == pytest.approx(-2.0, abs=0.15)
+
+
+def test_kepler_adaptive_rk4_beats_fixed_rk4_at_1e_5(quick_charts):
+    out, _ = quick_charts
+    rows = _rows(out / "workprec_kepler.csv")
+    adaptive = [r["nfev"] for r in rows if r["mode"] == "adaptive" and r["method"].startswith("rk4")
+                and r["error"] <= 1e-5]
+    fixed = [r["nfev"] for r in rows if r["mode"] == "fixed" and r["method"] == "rk4"
+             and r["error"] <= 1e-5]
+    assert adaptive and fixed
+    assert min(adaptive) < min(fixed) / 5  # NUMERICS.md: ~2,840 against ~64,000
+
+
+def test_workprec_rows_are_sane(quick_charts):
+    out, _ = quick_charts
+    rows = _rows(out / "workprec_lotka-volterra.csv")
+    modes = {r["mode"] for r in rows}
+    assert modes == {"fixed", "adaptive", "scipy"}
+    assert not any(r["method"] in ("symplectic_euler", "verlet") for r in rows)  # first order system
+    scipy45 = {r["h_or_tol"]: r for r in rows if r["method"] == "scipy RK45"}
+    # NUMERICS.md: RK45 at tol 1e-5 → 2.2e-4 / 446 evaluations
+    assert scipy45[1e-5]["nfev"] == 446 and scipy45[1e-5]["error"] == pytest.approx(2.2e-4, rel=0.05)
+    ext = {r["h_or_tol"]: r for r in rows if r["method"] == "rk4+extrap"}
+    errs = [ext[t]["error"] for t in sorted(ext, reverse=True)]
+    assert errs[-1] < 1e-3 * errs[0]  # tightening tol buys accuracy
+    assert all(math.isfinite(r["wall_s"]) and r["wall_s"] >= 0 for r in rows)
+
+
+def test_stability_and_energy_csv(quick_charts):
+    out, _ = quick_charts
+    with open(out / "stability.csv", newline="") as fh:
+        st = list(csv.DictReader(fh))
+    for r in st:
+        th, me = float(r["h_theory"]), float(r["h_measured"])
+        if th > 0:
+            assert me == pytest.approx(th, rel=0.01), r
+    with open(out / "energy_drift.csv", newline="") as fh:
+        en = list(csv.DictReader(fh))
+    last = {(r["system"], r["method"]): float(r["rel_error"]) for r in en}
+    for system in {r["system"] for r in en}:
+        assert last[(system, "euler")] > 1.0  # grows by (1 + h²ω²) per step
+        assert last[(system, "rk4")] < 1e-6
+        sym = [float(r["rel_error"]) for r in en if r["system"] == system
+               and r["method"] in ("symplectic_euler", "verlet")]
+        assert max(sym) < 0.05  # bounded
+
+
+def test_unknown_chart_name_is_rejected(tmp_path):
+    with pytest.raises(ValueError, match="allowed"):
+        run_charts(tmp_path, quick=True, which="nope")
+
+
+def test_damped_spring_closed_form():
+    r = solve(DAMPED_SPRING.f, DAMPED_SPRING.y0, DAMPED_SPRING.t_span, method="rk4", h=1e-3)
+    assert np.abs(r.y[:, -1] - DAMPED_SPRING.y_end()).max() < 1e-8
+    assert DAMPED_SPRING.y_end()[0] == pytest.approx(0.17509922, abs=1e-7)

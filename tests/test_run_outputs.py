@@ -1,0 +1,137 @@
+"""Where frames go and what happens when they cannot: the config's ``output`` folder stays inside
+renders/, unwritable output and a full disk give one line and exit 4 with no partial frame,
+capacity overflow is reported, and frames do not depend on the CPU thread count."""
+import errno
+import os
+import re
+
+import pytest
+from PIL import Image
+
+from runhelp import assert_whole_frames, call, particles, same_bytes
+
+TINY = """seed = 2
+fps = 30
+frames = 6
+{extra}
+[render]
+width = 48
+height = 32
+[[emitters]]
+effect = "sparks"
+rate = {rate}
+{emitter}
+"""
+
+
+def write_cfg(folder, name="fx", extra="", rate=400.0, emitter=""):
+    path = folder / f"{name}.toml"
+    path.write_text(TINY.format(extra=extra, rate=rate, emitter=emitter))
+    return path
+
+
+def test_config_output_folder_lands_under_renders(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    cfg = write_cfg(tmp_path, extra='output = "shots/my_sparks"')
+    code, out, err = call("run", cfg, "--quiet")
+    assert code == 0, err
+    assert assert_whole_frames(tmp_path / "renders" / "shots" / "my_sparks") == 6
+    # without `output` the default stays renders/<config name>
+    cfg = write_cfg(tmp_path, name="plain")
+    assert call("run", cfg, "--quiet")[0] == 0
+    assert assert_whole_frames(tmp_path / "renders" / "plain") == 6
+
+
+@pytest.mark.parametrize("value", ["/tmp/x", "../x", "a/../../x", "C:/x", "", "..", "a\\\\b"])
+def test_config_output_cannot_leave_renders(tmp_path, monkeypatch, value):
+    monkeypatch.chdir(tmp_path)
+    cfg = write_cfg(tmp_path, extra=f'output = "{value}"')
+    code, out, err = call("run", cfg, "--quiet")
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and f"{cfg}: output: " in lines[0], err
+    assert not (tmp_path / "renders").exists()
+
+
+def test_config_output_through_a_symlink_is_refused_but_out_may_go_anywhere(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "renders").mkdir()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    os.symlink(elsewhere, tmp_path / "renders" / "link")
+    cfg = write_cfg(tmp_path, extra='output = "link/fx"')
+    code, out, err = call("run", cfg, "--quiet")
+    assert code == 2 and "leads outside renders/" in err, err
+    assert os.listdir(elsewhere) == []
+    code, out, err = call("run", cfg, "--quiet", "--out", elsewhere / "fx")  # the command line may
+    assert code == 0, err
+    assert assert_whole_frames(elsewhere / "fx") == 6
+
+
+@pytest.mark.parametrize("target", ["file", "/proc/particles-test/out"])
+def test_unwritable_output_exits_4_with_one_line(tmp_path, target):
+    cfg = write_cfg(tmp_path)
+    out = tmp_path / "a-file" if target == "file" else target
+    if target == "file":
+        out.write_text("not a folder")
+    code, stdout, err = call("run", cfg, "--out", out, "--quiet")
+    lines = err.strip().splitlines()
+    assert code == 4 and len(lines) == 1 and str(out) in lines[0], err
+    if target == "file":
+        assert out.read_text() == "not a folder"
+
+
+def test_disk_full_mid_run_exits_4_and_leaves_no_partial_frame(tmp_path, monkeypatch):
+    cfg = write_cfg(tmp_path)
+    out = tmp_path / "out"
+    real_save = Image.Image.save
+    calls = []
+
+    def save(self, fp, *a, **kw):
+        calls.append(fp)
+        if len(calls) == 4:  # the fourth frame: half a file, then the disk is full
+            with open(fp, "wb") as fh:
+                fh.write(b"\x89PNG\r\n\x1a\n partial")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_save(self, fp, *a, **kw)
+
+    monkeypatch.setattr(Image.Image, "save", save)
+    code, stdout, err = call("run", cfg, "--out", out, "--quiet")
+    lines = err.strip().splitlines()
+    assert code == 4, err
+    assert len(lines) == 1 and "No space left on device" in lines[0] and str(out) in lines[0], err
+    assert "frames 0..2 kept" in lines[0]
+    assert assert_whole_frames(out) == 3
+    assert [f for f in os.listdir(out) if f.startswith(".")] == [".particles-run.json"]
+
+
+def test_emitter_over_capacity_keeps_running_and_reports_drops(tmp_path):
+    # 1,200 particles/s living 5 s into 40 slots: 6 frames want 240 particles; 200 do not fit
+    cfg = write_cfg(tmp_path, rate=1200.0, emitter="lifetime = 5.0\nlifetime_randomness = 0.0\ncapacity = 40")
+    code, stdout, err = call("run", cfg, "--out", tmp_path / "out", "--quiet")
+    assert code == 0, err
+    assert assert_whole_frames(tmp_path / "out") == 6
+    m = re.search(r"peak live particles ([\d,]+) of ([\d,]+); dropped ([\d,]+)", stdout)
+    assert m, stdout
+    peak, cap, dropped = (int(g.replace(",", "")) for g in m.groups())
+    assert peak == cap == 40
+    assert 195 <= dropped <= 200
+    assert "particles did not fit" in err and f"{dropped:,}" in err
+
+
+def test_frames_are_identical_with_one_and_two_threads(tmp_path):
+    outs = []
+    for threads, where in ((1, "before"), (2, "after"), (2, "again")):
+        out = tmp_path / f"t{threads}{where}"
+        args = ["run", "configs/sparks.toml", "--frames", "10", "--size", "160x90", "--out", out,
+                "--quiet"]
+        r = particles(*(["--threads", threads] + args if where == "before" else args + ["--threads", threads]))
+        assert r.returncode == 0, r.stderr
+        outs.append(out)
+    assert same_bytes(outs[0], outs[1]) == 10
+    assert same_bytes(outs[1], outs[2]) == 10
+
+
+def test_bad_thread_count_is_bad_input(tmp_path):
+    r = particles("--threads", "0", "run", "configs/sparks.toml", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "--threads" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "o").exists()
