@@ -29,8 +29,9 @@ def _buffers(r):
 def test_tiled_matches_serial_splat(path):
     s = _scene(path)
     r = s.renderer
-    serial = s.render()
+    serial = r.render(s.camera, serial=True)
     ref = _buffers(r)
+    assert np.array_equal(s.render(), render_tiled(r, r.tiled, s.camera))  # Renderer's own path
     tiled = TiledSplat(s.particles.state, look_of(r), targets_of(r), r.W, r.H, min_pairs=16,
                        pairs_per_particle=0.01)  # forces the pair list to grow
     img = render_tiled(r, tiled, s.camera)

@@ -95,7 +95,6 @@ def _what_compiled(scene):
 
 
 def run(quick: bool = False):
-    from ..render.tiles import TiledSplat, look_of, render_tiled, targets_of
     from .frame import build_scene
 
     n = 5_000 if quick else 400_000
@@ -109,11 +108,10 @@ def run(quick: bool = False):
         with KernelLog() as log:
             scene = build_scene(n, width=W, height=H, config=cfg)
             R = scene.renderer
-            tiled = TiledSplat(scene.particles.state, look_of(R), targets_of(R), R.W, R.H)
 
             def frame():
                 scene.advance_frame()
-                render_tiled(R, tiled, scene.camera)
+                scene.render()
 
             frame()
         t = time_median(frame, repeats, warmup=1)

@@ -77,13 +77,13 @@ def _camera_args(camera):
 
 
 def run(quick: bool = False):
-    from ..render.tiles import TiledSplat, look_of, render_tiled, targets_of
+    from ..render.tiles import render_tiled
 
     n, w, h = (50_000, 320, 180) if quick else (1_000_000, W, H)
     repeats = 3 if quick else 7
     scene = build_scene(n, width=w, height=h)
     R = scene.renderer
-    tiled = TiledSplat(scene.particles.state, look_of(R), targets_of(R), R.W, R.H)
+    tiled = R.tiled
     args = _camera_args(scene.camera)
     cam = scene.camera
 
@@ -93,7 +93,7 @@ def run(quick: bool = False):
 
     def frame_serial():
         scene.advance_frame()
-        return R.render(cam)
+        return R.render(cam, serial=True)
 
     t_tiled = time_median(frame_tiled, repeats, warmup=1)
     t_serial = time_median(frame_serial, max(2, repeats // 2), warmup=1)
