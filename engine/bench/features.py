@@ -1,8 +1,9 @@
 """"Model no more than a scene needs": the cost of each optional feature, measured by switching
 it off, and proof that a scene without a feature compiles none of its code.
 
-The base scene has every feature this engine has: colliders (a ground plane and a sphere), drag,
-streaks and alpha blending (an alpha emitter beside the additive one). Each variant turns one off
+The base scene has the optional particle features: colliders (a ground plane and a sphere), drag,
+curl-noise turbulence, sub-emitters (sparks feed dust on death), streaks and alpha blending (an
+alpha emitter beside the additive one); it has no spring bodies (the cloth row times springs). Each variant turns one off
 and is timed per frame (step + tiled render) in the same process. The proof records the kernels
 each variant compiles (Taichi's ``Kernel.materialize``) and what was compiled into them: the
 force terms (``Forces.names``), collider code, the OIT (alpha) path, streak geometry.
@@ -23,10 +24,11 @@ def base_config(n: int) -> dict:
     return {
         "seed": 4, "fps": 60.0, "frames": 1,
         "solver": {"integrator": "symplectic_euler", "h": 1.0 / 240.0},
-        "forces": {"gravity": [0.0, -9.81, 0.0], "drag": 0.4},
+        "forces": {"gravity": [0.0, -9.81, 0.0], "drag": 0.4, "turbulence": {"strength": 2.0}},
         "render": {"width": W, "height": H},
         "emitters": [
             dict(common, name="sparks", blend="additive", rate=n_add, capacity=n_add, streak=0.02,
+                 sub_emitters=[{"event": "death", "emitter": "dust", "count": 1}],
                  color=[[0.0, 4.0, 2.0, 0.6], [1.0, 1.0, 0.2, 0.05]], size=[[0.0, 0.012]]),
             dict(common, name="dust", blend="additive", rate=n - n_add, capacity=n - n_add,
                  color=[[0.0, 0.3, 0.28, 0.25]], alpha=[[0.0, 0.0], [0.2, 0.25], [1.0, 0.0]],
@@ -54,9 +56,17 @@ def variants(n: int):
     v["emitters"][1]["blend"] = "additive"
     out["no alpha blending"] = v
     v = copy.deepcopy(base)
+    v["forces"]["turbulence"]["strength"] = 0.0
+    out["no turbulence"] = v
+    v = copy.deepcopy(base)
+    v["emitters"][0]["sub_emitters"] = []
+    out["no sub-emitters"] = v
+    v = copy.deepcopy(base)
     v["colliders"] = []
     v["forces"]["drag"] = 0.0
+    v["forces"]["turbulence"]["strength"] = 0.0
     v["emitters"][0]["streak"] = 0.0
+    v["emitters"][0]["sub_emitters"] = []
     v["emitters"][1]["blend"] = "additive"
     out["none of them"] = v
     return out
@@ -90,6 +100,8 @@ def _what_compiled(scene):
     parts = [f"forces: {'+'.join(scene.particles.forces.names) or 'none'}",
              f"colliders compiled: {scene.colliders.count}",
              f"OIT path: {'yes' if R.uses_alpha else 'no'}",
+             f"sub-emitter events: {'yes' if scene.particles.emitters.uses_events else 'no'}",
+             f"spring bodies: {len(scene.bodies)}",
              f"streaks: {'yes' if any(e.streak > 0 for e in scene.cfg.emitters) else 'no'}"]
     return "; ".join(parts)
 
@@ -125,6 +137,9 @@ def run(quick: bool = False):
             assert scene.colliders.count == 0
         if "drag" not in scene.particles.forces.names:
             assert not scene.particles.forces.use_drag
+        if not any(e.sub_emitters for e in scene.cfg.emitters):
+            assert not scene.particles.emitters.uses_events
+        assert not scene.bodies  # no spring code built or run
         if not R.uses_alpha:
             assert all(e.blend != "alpha" for e in scene.cfg.emitters)
         rows.append(Row(sec, name, t * 1e3, "ms/frame",
