@@ -238,7 +238,8 @@ class TiledSplat:
         def deposit(px0, py0, px1, py1, cx, cy, rad, z, col, a, is_add, energy, wzf, soft):
             """The serial splat's soft disc limited to one tile's pixels [px0, px1] × [py0, py1].
             Taichi's dynamic inner loops cost more than the pixel work of the 1–3 px sprites of a
-            dense pool, so a disc that fits a 2×2 or 4×4 block runs no loop at all. Each pixel
+            dense pool, so a disc that fits a 2×2 or 4×4 block runs no loop at all (the
+            blocks are unrolled at compile time). Each pixel
             gets one contribution per disc, so the order of pixels within a disc is immaterial."""
             x0 = ti.max(px0, ti.cast(ti.floor(cx - rad), ti.i32))
             x1 = ti.min(px1, ti.cast(ti.floor(cx + rad), ti.i32))
@@ -249,15 +250,12 @@ class TiledSplat:
                 span = ti.max(x1 - x0, y1 - y0)
                 if span < 2:
                     block(2, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft)
-                elif span < 3:
-                    block(3, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft)
                 elif span < 4:
                     block(4, x0, y0, x1, y1, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft)
-                else:
-                    for jy in range((y1 - y0 + 4) // 4):
-                        for jx in range((x1 - x0 + 4) // 4):
-                            block(4, x0 + 4 * jx, y0 + 4 * jy, x1, y1, cx, cy, inv_r2, z, col, a,
-                                  is_add, energy, wzf, soft)
+                else:  # large discs are few; one inlined pixel keeps the kernel (and its build) small
+                    for yy in range(y0, y1 + 1):
+                        for xx in range(x0, x1 + 1):
+                            pixel(xx, yy, True, cx, cy, inv_r2, z, col, a, is_add, energy, wzf, soft)
 
         @ti.kernel
         def accumulate(pairs: ti.template()):
