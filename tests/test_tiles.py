@@ -73,3 +73,20 @@ def test_tiled_is_byte_identical_across_thread_counts():
         assert o.returncode == 0, o.stderr[-2000:]
     digests = {o.stdout.strip().splitlines()[-1] for o in out}
     assert len(digests) == 1, digests
+
+
+def test_background_is_redrawn_when_camera_or_colliders_move():
+    s = _scene("configs/sparks.toml", frames=5)
+    r = s.renderer
+    first = s.render()
+    assert np.array_equal(s.render(), first)  # cached background
+    moved = s.camera.__class__((0.3, 1.8, 5.0), s.camera.look_at, s.camera.fov)
+    other = r.render(moved)
+    assert not np.array_equal(other, first)
+    assert np.array_equal(s.render(), first)
+    pos = s.colliders.collider_point.to_numpy()[: s.colliders.count]
+    s.colliders.move_to(s.t + 0.1, pos + np.array([0.0, 0.3, 0.0], np.float32))
+    cached = s.render()
+    r._bg_key = None
+    assert np.array_equal(cached, s.render())  # the move was noticed: same as a full redraw
+    assert not np.array_equal(cached, first)

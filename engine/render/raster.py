@@ -51,6 +51,8 @@ class Renderer:
         self.has_particles = state is not None and E > 0
         self.uses_alpha = self.has_particles and any(c.blend == "alpha" for c in emitter_configs)
         self.uses_additive = self.has_particles and any(c.blend == "additive" for c in emitter_configs)
+        self._colliders = colliders
+        self._bg_key = None  # (camera, collider placement) the background fields were drawn for
         self._build_background(colliders)
         if self.has_particles:
             self._build_particles(state, emitter_configs)
@@ -248,6 +250,15 @@ class Renderer:
                 oit_w[py, px] = 0.0
                 oit_logT[py, px] = 0.0
 
+        @ti.kernel
+        def clear():
+            """Reset the accumulators only: the background and its depth are still valid."""
+            for py, px in bg:
+                light[py, px] = ti.Vector([0.0, 0.0, 0.0])
+                oit_rgb[py, px] = ti.Vector([0.0, 0.0, 0.0])
+                oit_w[py, px] = 0.0
+                oit_logT[py, px] = 0.0
+
         @ti.func
         def aces(x):
             return ti.math.clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
@@ -275,7 +286,18 @@ class Renderer:
                 for ch in ti.static(range(3)):
                     image[py, px, ch] = ti.cast(ti.min(255.0, out[ch] * 255.0 + 0.5), ti.u8)
 
-        self._background, self._resolve = background, resolve
+        self._background, self._resolve, self._clear = background, resolve, clear
+
+    def _background_key(self, args):
+        """What the background depends on, or None when it must be redrawn every frame (meshes
+        draw into it)."""
+        if self.mesh is not None:
+            return None
+        c = self._colliders
+        placed = b"" if c is None else (c.collider_point.to_numpy().tobytes()
+                                        + c.collider_normal.to_numpy().tobytes()
+                                        + c.collider_radius.to_numpy().tobytes())
+        return (tuple(tuple(float(x) for x in a) for a in args[:4]), float(args[4]), placed)
 
     def render(self, camera, exposure=None, serial=False) -> np.ndarray:
         """Render the pool as seen by ``camera``; returns an (H, W, 3) uint8 sRGB image.
@@ -284,7 +306,12 @@ class Renderer:
         p, f, r, u = camera.basis()
         th = camera.tan_half
         args = (p.tolist(), f.tolist(), r.tolist(), u.tolist(), th)
-        self._background(*args)
+        key = self._background_key(args)
+        if key is not None and key == self._bg_key:
+            self._clear()  # same camera, colliders where they were: the background is unchanged
+        else:
+            self._background(*args)
+        self._bg_key = key
         if self.mesh is not None:
             self.mesh.update()
             self.mesh.draw(args)
