@@ -108,6 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
     ls = sub.add_parser("list", help="list the configs and effect presets")
     ls.add_argument("--dir", default="configs")
     ls.set_defaults(func=lambda a: _commands().cmd_list(a), no_taichi=True)
+
+    b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
+    b.add_argument("--quick", action="store_true", help="small sizes (CI: well under a minute)")
+    b.add_argument("--only", default=None,
+                   help="comma-separated sections: step, frame, ode, startup, features, cloth")
+    b.set_defaults(func=_cmd_bench)
+
     c = sub.add_parser("chart", help="work-precision, stability and energy-drift charts (PNG + CSV)")
     c.add_argument("--out", default=os.path.join("renders", "charts"))
     c.add_argument("--quick", action="store_true", help="coarse sweeps (under a minute)")
@@ -138,6 +145,16 @@ def _cmd_chart(args) -> int:
     for p in paths:
         print(p)
     return EXIT_OK
+
+
+def _cmd_bench(args) -> int:
+    from . import bench
+
+    only = [s.strip() for s in args.only.split(",") if s.strip()] if args.only else None
+    try:
+        return bench.main(quick=args.quick, only=only)
+    except ValueError as e:
+        raise UserError(str(e)) from None
 
 
 def _commands():

@@ -34,7 +34,8 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False) 
 
     ``arch`` is one of :data:`ARCHES`. Later calls are no-ops (a different arch after the first
     call raises, since fields already allocated cannot move). ``threads`` caps CPU threads.
-    The offline cache stays on so a second run of the same scene starts fast.
+    The offline cache stays on so a second run of the same scene starts fast; it lives where
+    ``PARTICLES_TI_CACHE`` points (a folder) if set, else in Taichi's default place.
     """
     if arch not in ARCHES:
         raise ValueError(f"arch: unknown value {arch!r}; allowed: {', '.join(ARCHES)}")
@@ -47,6 +48,8 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False) 
         return "host"
     kwargs = dict(arch=getattr(ti, arch), default_fp=ti.f32, offline_cache=True,
                   log_level=ti.WARN, debug=debug, random_seed=0)
+    if os.environ.get("PARTICLES_TI_CACHE"):
+        kwargs["offline_cache_file_path"] = os.environ["PARTICLES_TI_CACHE"]
     if threads and arch == "cpu":
         kwargs["cpu_max_num_threads"] = int(threads)
     with contextlib.redirect_stdout(io.StringIO()):  # "[Taichi] Starting on arch=..." banner

@@ -32,6 +32,10 @@ class Forces:
         self.emitter_gravity_scale = ti.field(ti.f32, shape=E)
         self.emitter_gravity_scale.from_numpy(np.array([e.gravity_scale for e in emitter_configs], np.float32))
         self.use_drag = cfg.drag > 0 or any((e.drag or 0.0) > 0 for e in emitter_configs)
+        # Only when some emitter sets its own drag (or gravity scale) does the kernel gather a
+        # per-emitter value by the particle's emitter id; otherwise the scene's value is used.
+        self.per_emitter_drag = any(e.drag is not None for e in emitter_configs)
+        self.per_emitter_gravity = any(e.gravity_scale != 1.0 for e in emitter_configs)
         self.use_buoyancy = any(e.buoyancy != 0 for e in emitter_configs)
         tb = cfg.turbulence
         self.use_turbulence = tb.strength > 0 and any(e.turbulence > 0 for e in emitter_configs)
@@ -78,18 +82,24 @@ class Forces:
         """``accel(x, v, age, t, i)``: the sum of the scene's terms for particle slot i."""
         g, wind, kdrag = self.force_gravity, self.force_wind, self.force_drag
         pem, edrag = self._state.particle_emitter, self._emitter_drag
+        per_emitter, per_emitter_g = self.per_emitter_drag, self.per_emitter_gravity
 
         gscale = self.emitter_gravity_scale
 
         @ti.func
         def gravity(x, v, age, t, i):
-            return g[None] * gscale[pem[i]]
+            a = g[None]
+            if ti.static(per_emitter_g):
+                a = a * gscale[pem[i]]
+            return a
 
         @ti.func
         def drag(x, v, age, t, i):
-            k = edrag[pem[i]]
-            if k < 0.0:
-                k = kdrag[None]
+            k = kdrag[None]
+            if ti.static(per_emitter):
+                ke = edrag[pem[i]]
+                if ke >= 0.0:
+                    k = ke
             return -k * (v - wind[None])  # linear drag relative to the air (Stokes regime)
 
         available = {"gravity": gravity, "drag": drag}

@@ -10,8 +10,10 @@ Passes, each one kernel:
      Bavoil 2013): Σ c·α·w, Σ α·w and Σ log(1 − α) are sums, so the image does not depend on the
      order particles sit in the pool, and no per-frame sort is needed (PERF-NOTES: a 1M sort costs
      0.38 s). Its cost — colour is an average, not exact "over" — is invisible in soft media.
-   The loop is serialised: float atomics from several threads make sums depend on thread timing,
-   and PERF-NOTES measured the serial loop as faster anyway (7.1 vs 14.3 ms for 1M splats).
+   Float atomics from several threads would make sums depend on thread timing, so ``render``
+   splats through ``tiles.TiledSplat``: particles binned into screen tiles by a stable counting
+   sort, each tile accumulated by one thread in slot order — parallel, and every pixel sees the
+   same contributions in the same order as the serial loop kept here as ``_splat`` (reference).
 3. ``resolve``: composite (background·T + OIT colour·shade·(1 − T) + additive light, where
    shade darkens thick media with their optical depth), exposure, the ACES
    filmic fit (Narkowicz 2015), sRGB encoding to 8 bits.
@@ -49,6 +51,8 @@ class Renderer:
         self.has_particles = state is not None and E > 0
         self.uses_alpha = self.has_particles and any(c.blend == "alpha" for c in emitter_configs)
         self.uses_additive = self.has_particles and any(c.blend == "additive" for c in emitter_configs)
+        self._colliders = colliders
+        self._bg_key = None  # (camera, collider placement) the background fields were drawn for
         self._build_background(colliders)
         if self.has_particles:
             self._build_particles(state, emitter_configs)
@@ -157,7 +161,10 @@ class Renderer:
                         else:
                             deposit(cx, cy, rad, z, col, a, is_add, energy, soft)
 
-        self._splat = splat
+        self._splat = splat  # the serial reference; render() uses the tiled splat (same image)
+        from .tiles import TiledSplat, look_of, targets_of
+
+        self.tiled = TiledSplat(state, look_of(self), targets_of(self), W, H)
 
     def _build_background(self, colliders):
         W, H, cfg = self.W, self.H, self.cfg
@@ -243,6 +250,15 @@ class Renderer:
                 oit_w[py, px] = 0.0
                 oit_logT[py, px] = 0.0
 
+        @ti.kernel
+        def clear():
+            """Reset the accumulators only: the background and its depth are still valid."""
+            for py, px in bg:
+                light[py, px] = ti.Vector([0.0, 0.0, 0.0])
+                oit_rgb[py, px] = ti.Vector([0.0, 0.0, 0.0])
+                oit_w[py, px] = 0.0
+                oit_logT[py, px] = 0.0
+
         @ti.func
         def aces(x):
             return ti.math.clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
@@ -270,18 +286,39 @@ class Renderer:
                 for ch in ti.static(range(3)):
                     image[py, px, ch] = ti.cast(ti.min(255.0, out[ch] * 255.0 + 0.5), ti.u8)
 
-        self._background, self._resolve = background, resolve
+        self._background, self._resolve, self._clear = background, resolve, clear
 
-    def render(self, camera, exposure=None) -> np.ndarray:
-        """Render the pool as seen by ``camera``; returns an (H, W, 3) uint8 sRGB image."""
+    def _background_key(self, args):
+        """What the background depends on, or None when it must be redrawn every frame (meshes
+        draw into it)."""
+        if self.mesh is not None:
+            return None
+        c = self._colliders
+        placed = b"" if c is None else (c.collider_point.to_numpy().tobytes()
+                                        + c.collider_normal.to_numpy().tobytes()
+                                        + c.collider_radius.to_numpy().tobytes())
+        return (tuple(tuple(float(x) for x in a) for a in args[:4]), float(args[4]), placed)
+
+    def render(self, camera, exposure=None, serial=False) -> np.ndarray:
+        """Render the pool as seen by ``camera``; returns an (H, W, 3) uint8 sRGB image.
+        Particles are splatted by the tiled parallel path (engine.render.tiles); ``serial`` uses
+        the one-thread reference splat instead (the same image up to float rounding)."""
         p, f, r, u = camera.basis()
         th = camera.tan_half
         args = (p.tolist(), f.tolist(), r.tolist(), u.tolist(), th)
-        self._background(*args)
+        key = self._background_key(args)
+        if key is not None and key == self._bg_key:
+            self._clear()  # same camera, colliders where they were: the background is unchanged
+        else:
+            self._background(*args)
+        self._bg_key = key
         if self.mesh is not None:
             self.mesh.update()
             self.mesh.draw(args)
         if self.has_particles:
-            self._splat(*args)
+            if serial:
+                self._splat(*args)
+            else:
+                self.tiled.splat(*args)
         self._resolve(self.cfg.exposure if exposure is None else exposure)
         return self.image.to_numpy()

@@ -1,0 +1,17 @@
+"""Reference kernels for the bench: the STREAM-like in-place bandwidth limit.
+
+(no ``from __future__ import annotations``: Taichi reads kernel annotations at definition)
+"""
+import taichi as ti
+
+
+@ti.kernel
+def stream_rmw(pos: ti.template(), vel: ti.template(), age: ti.template(), life: ti.template(),
+               a: ti.f32, b: ti.f32):
+    """Read and write every byte of a particle's 32-byte state once: the physical limit of a
+    particle step that must touch its state (a·x + b keeps the values bounded and finite)."""
+    for i in pos:
+        pos[i] = pos[i] * a + b
+        vel[i] = vel[i] * a + b
+        age[i] = age[i] * a + b
+        life[i] = life[i] * a + b
