@@ -26,7 +26,6 @@ import taichi as ti
 from ..colliders import PLANE
 from ..particles.curves import Curves
 
-MAX_SPLAT_RADIUS = 48.0  # pixels; larger sprites are clamped (and dimmed to keep their energy)
 vec3 = ti.types.vector(3, ti.f32)
 
 
@@ -63,6 +62,7 @@ class Renderer:
             self.mesh = MeshLayer(bodies, self)
 
     def _build_particles(self, state, emitter_configs):
+        from .tiles import look_of, make_sprite_funcs, oit_depth_weight
         E = len(emitter_configs)
         self.color = Curves([e.color for e in emitter_configs], 3)
         self.alpha = Curves([e.alpha for e in emitter_configs], 1)
@@ -78,15 +78,9 @@ class Renderer:
         light, oit_rgb, oit_w, oit_logT, depth = (
             self.light, self.oit_rgb, self.oit_w, self.oit_logT, self.depth)
         S = state
-        pos, vel, age, life, alive, pem, prand = (
-            S.particle_pos, S.particle_vel, S.particle_age, S.particle_life, S.particle_alive,
-            S.particle_emitter, S.particle_rand)
         cap = S.capacity
-        color_at, alpha_at, size_at = (self.color.make_func(), self.alpha.make_func(),
-                                       self.size.make_func())
-        additive, streak, size_rand = self.emitter_additive, self.emitter_streak, self.emitter_size_rand
+        additive, streak = self.emitter_additive, self.emitter_streak
         uses_alpha, uses_add = self.uses_alpha, self.uses_additive
-        aspect = W / H
 
         @ti.func
         def deposit(cx, cy, rad, z, col, a, is_add, energy, soft):
@@ -112,57 +106,34 @@ class Renderer:
                         if ti.static(uses_alpha):
                             if not is_add:
                                 aa = ti.min(0.98, a * w)
-                                # McGuire & Bavoil (2013) eq. 10 depth weight
-                                wz = aa * ti.max(1e-2, ti.min(3e3, 10.0 / (1e-5 + ti.pow(z / 5.0, 2.0)
-                                                                         + ti.pow(z / 200.0, 6.0))))
+                                wz = aa * oit_depth_weight(z)  # McGuire & Bavoil (2013) eq. 10
                                 oit_rgb[yy, xx] += col * wz
                                 oit_w[yy, xx] += wz
                                 oit_logT[yy, xx] += ti.log(1.0 - aa)
 
+        project, streak_end = make_sprite_funcs(S, look_of(self), W, H)
+
         @ti.kernel
         def splat(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
-            half_h = 0.5 * H
             ti.loop_config(serialize=True)
             for i in range(cap):
-                if alive[i] != 0 and age[i] >= 0.0:  # (negative age: not born yet)
-                    e = pem[i]
-                    tl = ti.min(1.0, age[i] / life[i])
-                    dpos = pos[i] - o
-                    z = dpos.dot(f)
-                    if z > 0.05:
-                        col = color_at(e, tl)
-                        a = alpha_at(e, tl)[0]
-                        sz = size_at(e, tl)[0] * (1.0 + size_rand[e] * (2.0 * prand[i] - 1.0))
-                        scale = half_h / (z * th)
-                        cx = dpos.dot(r) * scale + 0.5 * W
-                        cy = 0.5 * H - dpos.dot(u) * scale
-                        rad = 0.5 * sz * scale
-                        energy = 1.0
-                        if rad < 0.75:  # sub-pixel: draw at 0.75 px, keep the light it carries
-                            energy = (rad / 0.75) ** 2
-                            rad = 0.75
-                        if rad > MAX_SPLAT_RADIUS:
-                            rad = MAX_SPLAT_RADIUS
-                        is_add = additive[e] != 0
-                        soft = ti.max(0.5 * sz, 1e-3)
-                        st = streak[e]
-                        if st > 0:
-                            tail = pos[i] - vel[i] * st - o
-                            zt = ti.max(tail.dot(f), 0.05)
-                            st_scale = half_h / (zt * th)
-                            tx = tail.dot(r) * st_scale + 0.5 * W
-                            ty = 0.5 * H - tail.dot(u) * st_scale
-                            length = ti.sqrt((tx - cx) ** 2 + (ty - cy) ** 2)
-                            n = ti.min(32, ti.cast(length / ti.max(0.5 * rad, 0.5), ti.i32) + 1)
-                            for s in range(n):
-                                a_s = (s + 0.5) / n
-                                deposit(cx + a_s * (tx - cx), cy + a_s * (ty - cy), rad, z, col,
-                                        a * (1.0 - 0.6 * a_s), is_add, energy * 2.0 / n, soft)
-                        else:
-                            deposit(cx, cy, rad, z, col, a, is_add, energy, soft)
+                drawn, e, cx, cy, rad, z, col, a, energy, sz = project(i, o, f, r, u, th)
+                if drawn != 0:
+                    is_add = additive[e] != 0
+                    soft = ti.max(0.5 * sz, 1e-3)
+                    if streak[e] > 0:
+                        tx, ty = streak_end(i, e, o, f, r, u, th)
+                        length = ti.sqrt((tx - cx) ** 2 + (ty - cy) ** 2)
+                        n = ti.min(32, ti.cast(length / ti.max(0.5 * rad, 0.5), ti.i32) + 1)
+                        for s in range(n):
+                            a_s = (s + 0.5) / n
+                            deposit(cx + a_s * (tx - cx), cy + a_s * (ty - cy), rad, z, col,
+                                    a * (1.0 - 0.6 * a_s), is_add, energy * 2.0 / n, soft)
+                    else:
+                        deposit(cx, cy, rad, z, col, a, is_add, energy, soft)
 
         self._splat = splat  # the serial reference; render() uses the tiled splat (same image)
-        from .tiles import TiledSplat, look_of, targets_of
+        from .tiles import TiledSplat, targets_of
 
         self.tiled = TiledSplat(state, look_of(self), targets_of(self), W, H)
 

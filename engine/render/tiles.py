@@ -40,6 +40,55 @@ def oit_depth_weight(z):
     return ti.max(1e-2, ti.min(3e3, 10.0 / (1e-5 + ti.pow(z / 5.0, 2.0) + ti.pow(z / 200.0, 6.0))))
 
 
+def make_sprite_funcs(S, look, W: int, H: int):
+    """The one definition of how a particle becomes a sprite, for the tiled and the serial splat.
+
+    ``project(i, o, f, r, u, th)`` → (drawn, emitter, cx, cy, rad px, z, colour, alpha, energy,
+    size m): sized in world units, sub-pixel sprites drawn at 0.75 px carrying their light, large
+    ones clamped. ``streak_end(i, e, o, f, r, u, th)`` → pixel (tx, ty) of the streak's tail."""
+    pos, vel, age, life, alive, pem, prand = (
+        S.particle_pos, S.particle_vel, S.particle_age, S.particle_life, S.particle_alive,
+        S.particle_emitter, S.particle_rand)
+    color_at, alpha_at, size_at = look.color_at, look.alpha_at, look.size_at
+    streak, size_rand = look.streak, look.size_rand
+
+    @ti.func
+    def project(i, o, f, r, u, th):
+        drawn, e = 0, 0
+        cx = cy = rad = z = a = energy = sz = 0.0
+        col = ti.Vector([0.0, 0.0, 0.0])
+        if alive[i] != 0 and age[i] >= 0.0:  # (negative age: not born yet)
+            e = pem[i]
+            tl = ti.min(1.0, age[i] / life[i])
+            dpos = pos[i] - o
+            z = dpos.dot(f)
+            if z > 0.05:
+                drawn = 1
+                col = color_at(e, tl)
+                a = alpha_at(e, tl)[0]
+                sz = size_at(e, tl)[0] * (1.0 + size_rand[e] * (2.0 * prand[i] - 1.0))
+                scale = 0.5 * H / (z * th)
+                cx = dpos.dot(r) * scale + 0.5 * W
+                cy = 0.5 * H - dpos.dot(u) * scale
+                rad = 0.5 * sz * scale
+                energy = 1.0
+                if rad < 0.75:  # sub-pixel: draw at 0.75 px, keep the light it carries
+                    energy = (rad / 0.75) ** 2
+                    rad = 0.75
+                if rad > MAX_SPLAT_RADIUS:
+                    rad = MAX_SPLAT_RADIUS
+        return drawn, e, cx, cy, rad, z, col, a, energy, sz
+
+    @ti.func
+    def streak_end(i, e, o, f, r, u, th):
+        tpos = pos[i] - vel[i] * streak[e] - o
+        zt = ti.max(tpos.dot(f), 0.05)
+        st_scale = 0.5 * H / (zt * th)
+        return tpos.dot(r) * st_scale + 0.5 * W, 0.5 * H - tpos.dot(u) * st_scale
+
+    return project, streak_end
+
+
 class TiledSplat:
     """Splats a particle pool into the renderer's accumulation fields (``light``, ``oit_rgb``,
     ``oit_w``, ``oit_logT``), depth-tested against ``depth``; same blending as the serial splat.
@@ -92,63 +141,42 @@ class TiledSplat:
                                                  self.spr_info, self.spr_tiles, self.spr_soft)
         hist, tcount, tstart = self.hist, self.tile_count, self.tile_start
 
+        project, streak_end = make_sprite_funcs(S, look, W, H)
+
         @ti.kernel
         def sprites(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
-            half_h = 0.5 * H
             for i in range(cap):
                 nsub = 0
-                if alive[i] != 0 and age[i] >= 0.0:  # (negative age: not born yet)
-                    e = pem[i]
-                    tl = ti.min(1.0, age[i] / life[i])
-                    dpos = pos[i] - o
-                    z = dpos.dot(f)
-                    if z > 0.05:
-                        col = color_at(e, tl)
-                        a = alpha_at(e, tl)[0]
-                        sz = size_at(e, tl)[0] * (1.0 + size_rand[e] * (2.0 * prand[i] - 1.0))
-                        scale = half_h / (z * th)
-                        cx = dpos.dot(r) * scale + 0.5 * W
-                        cy = 0.5 * H - dpos.dot(u) * scale
-                        rad = 0.5 * sz * scale
-                        energy = 1.0
-                        if rad < 0.75:  # sub-pixel: draw at 0.75 px, keep the light it carries
-                            energy = (rad / 0.75) ** 2
-                            rad = 0.75
-                        if rad > MAX_SPLAT_RADIUS:
-                            rad = MAX_SPLAT_RADIUS
-                        tx, ty = cx, cy
-                        nsub = 1
-                        st = streak[e]
-                        if st > 0:
-                            tpos = pos[i] - vel[i] * st - o
-                            zt = ti.max(tpos.dot(f), 0.05)
-                            st_scale = half_h / (zt * th)
-                            tx = tpos.dot(r) * st_scale + 0.5 * W
-                            ty = 0.5 * H - tpos.dot(u) * st_scale
-                            length = ti.sqrt((tx - cx) ** 2 + (ty - cy) ** 2)
-                            nsub = -(ti.min(32, ti.cast(length / ti.max(0.5 * rad, 0.5), ti.i32) + 1))
-                        # pixel bounds as the serial deposit computes them (padded by 1/64 px for
-                        # rounding along a streak), clamped in float before the integer cast
-                        lox = ti.max(-1.0, ti.min(W + 1.0, ti.min(cx, tx) - rad - 0.015625))
-                        hix = ti.max(-1.0, ti.min(W + 1.0, ti.max(cx, tx) + rad + 0.015625))
-                        loy = ti.max(-1.0, ti.min(H + 1.0, ti.min(cy, ty) - rad - 0.015625))
-                        hiy = ti.max(-1.0, ti.min(H + 1.0, ti.max(cy, ty) + rad + 0.015625))
-                        x0 = ti.max(0, ti.cast(ti.floor(lox), ti.i32))
-                        x1 = ti.min(W - 1, ti.cast(ti.floor(hix), ti.i32))
-                        y0 = ti.max(0, ti.cast(ti.floor(loy), ti.i32))
-                        y1 = ti.min(H - 1, ti.cast(ti.floor(hiy), ti.i32))
-                        if x0 <= x1 and y0 <= y1:
-                            geom[i] = ti.Vector([cx, cy, rad, z])
-                            slook[i] = ti.Vector([col[0], col[1], col[2], a])
-                            wz = 0.0
-                            if ti.static(uses_alpha):
-                                wz = oit_depth_weight(z)
-                            tail[i] = ti.Vector([energy, tx, ty, wz])
-                            tiles[i] = ti.Vector([x0 // TILE, y0 // TILE, x1 // TILE, y1 // TILE])
-                            info[i] = ti.Vector([0, ti.cast(additive[e] != 0, ti.i32)])
-                            softf[i] = ti.max(0.5 * sz, 1e-3)
-                        else:
-                            nsub = 0
+                drawn, e, cx, cy, rad, z, col, a, energy, sz = project(i, o, f, r, u, th)
+                if drawn != 0:
+                    tx, ty = cx, cy
+                    nsub = 1
+                    if streak[e] > 0:
+                        tx, ty = streak_end(i, e, o, f, r, u, th)
+                        length = ti.sqrt((tx - cx) ** 2 + (ty - cy) ** 2)
+                        nsub = -(ti.min(32, ti.cast(length / ti.max(0.5 * rad, 0.5), ti.i32) + 1))
+                    # pixel bounds as the serial deposit computes them (padded by 1/64 px for
+                    # rounding along a streak), clamped in float before the integer cast
+                    lox = ti.max(-1.0, ti.min(W + 1.0, ti.min(cx, tx) - rad - 0.015625))
+                    hix = ti.max(-1.0, ti.min(W + 1.0, ti.max(cx, tx) + rad + 0.015625))
+                    loy = ti.max(-1.0, ti.min(H + 1.0, ti.min(cy, ty) - rad - 0.015625))
+                    hiy = ti.max(-1.0, ti.min(H + 1.0, ti.max(cy, ty) + rad + 0.015625))
+                    x0 = ti.max(0, ti.cast(ti.floor(lox), ti.i32))
+                    x1 = ti.min(W - 1, ti.cast(ti.floor(hix), ti.i32))
+                    y0 = ti.max(0, ti.cast(ti.floor(loy), ti.i32))
+                    y1 = ti.min(H - 1, ti.cast(ti.floor(hiy), ti.i32))
+                    if x0 <= x1 and y0 <= y1:
+                        geom[i] = ti.Vector([cx, cy, rad, z])
+                        slook[i] = ti.Vector([col[0], col[1], col[2], a])
+                        wz = 0.0
+                        if ti.static(uses_alpha):
+                            wz = oit_depth_weight(z)
+                        tail[i] = ti.Vector([energy, tx, ty, wz])
+                        tiles[i] = ti.Vector([x0 // TILE, y0 // TILE, x1 // TILE, y1 // TILE])
+                        info[i] = ti.Vector([0, ti.cast(additive[e] != 0, ti.i32)])
+                        softf[i] = ti.max(0.5 * sz, 1e-3)
+                    else:
+                        nsub = 0
                 info[i][0] = nsub  # > 0: one disc; < 0: a streak of −nsub discs
 
         @ti.kernel
