@@ -17,7 +17,8 @@ import taichi as ti  # noqa: E402
 
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")
 
-_state = {"arch": None}
+_state = {"arch": None, "kwargs": None}
+_reset_hooks = []  # caches holding fields or kernels of the current Taichi program
 
 
 def _host_initialised() -> bool:
@@ -56,6 +57,24 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False) 
         ti.init(**kwargs)
     _state["arch"] = arch
     return arch
+
+
+def on_reset(hook) -> None:
+    """Register a function that drops a cache of fields/kernels when the program is reset."""
+    _reset_hooks.append(hook)
+
+
+def reset() -> None:
+    """Throw away the Taichi program (every field and kernel) and forget the init, so the next
+    ``init`` starts a fresh one. The LLVM backends allow at most 512 live SNode trees and 2048
+    SNodes per program, and every field allocated after a kernel ran opens a new tree: a long
+    process that builds many scenes (a test session) resets between groups of scenes. Objects
+    built before the reset must not be used after it."""
+    for hook in _reset_hooks:
+        hook()
+    if _state["arch"] not in (None, "host"):
+        ti.reset()
+    _state["arch"] = None
 
 
 def ensure_init() -> str:

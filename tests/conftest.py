@@ -12,3 +12,13 @@ from engine import runtime  # noqa: E402
 def taichi_session():
     runtime.init("cpu")
     yield
+
+
+@pytest.fixture(scope="module", autouse=True)
+def fresh_program_per_module():
+    """A fresh Taichi program after each test module: the LLVM backend holds at most 512 SNode
+    trees (and 2048 SNodes) per program, and a whole session of scenes would pass that (it
+    segfaulted in CI). The offline cache keeps recompilation cheap."""
+    yield
+    runtime.reset()
+    runtime.init("cpu")

@@ -14,7 +14,7 @@ import os
 import sys
 from typing import Iterable, List, Optional, Union
 
-CHARTS = ("workprec", "stability", "energy")
+CHARTS = ("workprec", "stability", "energy", "scenes")
 # NUMERICS.md's work–precision figures, drawn over the matching charts as × markers
 _NUMERICS_REFS = {
     "lotka-volterra": [
@@ -69,6 +69,17 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
         title = (f"Work–precision, {name} ({T}): fixed h for every method, step doubling over "
                  f"tol = rtol (atol = tol·1e-3), scipy solve_ivp as anchor")
         written.append(plot.work_precision_png(base + ".png", rows, title, _NUMERICS_REFS.get(name, ())))
+    if "scenes" in names:
+        from .scenes import cloth_rows, sparks_rows
+
+        for name, fn, what in (("sparks", sparks_rows, "sparks fountain, T = 1 s, colliders"),
+                               ("cloth", cloth_rows, "16×16 cloth pinned at two corners, T = 1 s")):
+            rows = fn(quick=quick)
+            base = os.path.join(out_dir, f"workprec_scene_{name}")
+            written.append(plot.write_csv(base + ".csv", rows, FIELDS))
+            written.append(plot.work_precision_png(
+                base + ".png", rows, f"Work–precision on a real scene: {what}; error against the "
+                f"same scene at a much smaller h (RK4)"))
     if "stability" in names:
         from .stability import NUMERICS_TABLE, stability_rows
 

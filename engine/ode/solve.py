@@ -14,7 +14,7 @@ from typing import Callable, Optional, Sequence  # no __future__ annotations: Ta
 import numpy as np
 import taichi as ti
 
-from ..runtime import ensure_init
+from ..runtime import ensure_init, on_reset
 from .controller import StepDoublingController, clip_to_target
 from .steppers import METHODS, doubling_fevals, doubling_step, is_finite, make_step, scaled_error
 
@@ -112,6 +112,13 @@ class _Kernels:
 
 
 _cache: dict = {}
+
+
+def _drop_cache():
+    _cache.clear()
+
+
+on_reset(_drop_cache)
 
 
 def _kernels(f, method, n, dtype, extrapolate) -> _Kernels:

@@ -30,14 +30,14 @@ from typing import Sequence, Union
 import numpy as np
 import taichi as ti
 
-from ..runtime import ensure_init
+from ..runtime import ensure_init, on_reset
 from .steppers import METHODS, is_finite, make_step
 
 GRID = 64  # candidate steps per spring per bisection round
 CAPACITY = 8192  # threads per kernel launch
 GROWTH_LIMIT_DAMPED, GROWTH_LIMIT_UNDAMPED = 1.001, 2.0
 
-_probes: dict = {}
+_probes: dict = {}  # per method; dropped with the Taichi program (runtime.reset)
 
 
 class _Probe:
@@ -96,6 +96,9 @@ class _Probe:
             self.probe(e - s, steps)
             out[s:e] = self.ok.to_numpy()[: e - s].astype(bool)
         return out
+
+
+on_reset(_probes.clear)
 
 
 def _probe(method: str) -> _Probe:
