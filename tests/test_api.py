@@ -1,6 +1,5 @@
 """The engine from a game loop: the Python API, fixed timestep, control, contacts, read-back."""
 import numpy as np
-import pytest
 
 from engine.api import FixedTimestep, ParticleScene, SceneBuilder
 from engine.render.camera import Camera
@@ -132,7 +131,9 @@ def test_independent_scenes_in_one_process_and_rebuilds_keep_particles():
     a.remove_emitter("more")
     assert len(a.particles()["position"]) == 3000
     a.remove_collider("ball")
+    assert a.scene.colliders.count == 0
     a.step(1 / 60)
+    assert len(a.particles()["position"]) == 3000  # removing a collider keeps the particles
 
 
 def test_game_example_runs_headless():

@@ -1,5 +1,4 @@
 """Effects: ramps, curl noise, buoyancy, order-independent blending, sub-emitters, golden images."""
-import math
 import os
 
 import numpy as np

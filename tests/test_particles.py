@@ -52,10 +52,11 @@ def test_lifetimes_end_on_time():
     assert alive[47] == 500 and alive[50] == 0, alive[44:52]
 
 
-def _collider_kernel(colliders, n):
+def _collide_batch(colliders, x0, v0):
+    """Positions and velocities after one pass of the colliders' function over (x0, v0)."""
     collide = colliders.make_func()
-    X = ti.Vector.field(3, ti.f32, shape=n)
-    V = ti.Vector.field(3, ti.f32, shape=n)
+    X = ti.Vector.field(3, ti.f32, shape=len(x0))
+    V = ti.Vector.field(3, ti.f32, shape=len(x0))
 
     @ti.kernel
     def run():
@@ -64,7 +65,10 @@ def _collider_kernel(colliders, n):
             X[i] = x
             V[i] = v
 
-    return X, V, run
+    X.from_numpy(x0)
+    V.from_numpy(v0)
+    run()
+    return X.to_numpy(), V.to_numpy()
 
 
 @pytest.mark.parametrize("e,mu", [(0.8, 0.0), (0.5, 0.3), (1.0, 0.0), (0.0, 1.0)])
@@ -76,11 +80,7 @@ def test_plane_impact_invariants(e, mu):
     n = 4096
     x0 = rng.uniform(-2, 2, (n, 3)).astype(np.float32)
     v0 = rng.normal(0, 3, (n, 3)).astype(np.float32)
-    X, V, run = _collider_kernel(c, n)
-    X.from_numpy(x0)
-    V.from_numpy(v0)
-    run()
-    x1, v1 = X.to_numpy(), V.to_numpy()
+    x1, v1 = _collide_batch(c, x0, v0)
     d0 = (x0 - [0.0, 0.5, 0.0]) @ n_hat
     d1 = (x1 - [0.0, 0.5, 0.0]) @ n_hat
     assert d1.min() > -1e-5  # no penetration after projection
@@ -104,11 +104,7 @@ def test_sphere_impact_invariants():
     n = 4096
     x0 = (rng.normal(0, 0.5, (n, 3)) + [0, 1, 0]).astype(np.float32)
     v0 = rng.normal(0, 3, (n, 3)).astype(np.float32)
-    X, V, run = _collider_kernel(c, n)
-    X.from_numpy(x0)
-    V.from_numpy(v0)
-    run()
-    x1, v1 = X.to_numpy(), V.to_numpy()
+    x1, v1 = _collide_batch(c, x0, v0)
     r1 = np.linalg.norm(x1 - [0, 1, 0], axis=1)
     assert r1.min() >= 0.7 * (1 - 1e-5)
     nrm = (x0 - [0, 1, 0]) / np.linalg.norm(x0 - [0, 1, 0], axis=1, keepdims=True)

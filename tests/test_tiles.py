@@ -1,5 +1,4 @@
 """The tiled splat: the serial splat's image, deterministic across runs and thread counts."""
-import hashlib
 import os
 import subprocess
 import sys

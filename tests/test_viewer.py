@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from test_cli import ENV, ROOT, particles
+from test_cli import ENV, ROOT
 
 
 @pytest.fixture(scope="module")

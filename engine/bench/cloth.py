@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import importlib.util
 
-from .common import Row
 
 
 def available() -> bool:

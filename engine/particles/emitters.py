@@ -61,9 +61,10 @@ class Emitters:
     """Per-emitter parameters as fields (shape (E,)), ring heads and serial counters (fields, so
     kernels and Python share one truth), clocks, and the spawn kernels."""
 
-    def __init__(self, configs, layout, state, seed: int):
+    def __init__(self, configs, layout, seed: int):
         self.configs = list(configs)
-        self.layout, self.state, self.seed = layout, state, int(seed)
+        self.layout, self.seed = layout, int(seed)
+        self.state = None  # the pool, given to build()
         E = len(self.configs)
         self.count = E
         self.index = {c.name: e for e, c in enumerate(self.configs) if c.name}
@@ -124,11 +125,11 @@ class Emitters:
         here = tuple(float(c) for c in self.position_at(e, t_now))
         self.runtime_paths[e] = [(t_now, here), (max(t_next, t_now + 1e-9), tuple(float(c) for c in position))]
 
-    def build(self):
+    def build(self, state):
         """Compile the spawn kernels. A particle born at t_s inside the step [t0, t1) about to be
         taken is written at the emitter's position at t_s with age −(t_s − t0): the step kernel
         then advances it from t_s (see :mod:`engine.particles.integrate`)."""
-        S = self.state
+        self.state = S = state
         pos, vel, age, life, alive = (S.particle_pos, S.particle_vel, S.particle_age,
                                       S.particle_life, S.particle_alive)
         pem, prand = S.particle_emitter, S.particle_rand

@@ -103,7 +103,6 @@ class Forces:
             return -k * (v - wind[None])  # linear drag relative to the air (Stokes regime)
 
         available = {"gravity": gravity, "drag": drag}
-        S = self._state
         if self.use_buoyancy:
             bu, inv_cool = self.emitter_buoyancy, self.emitter_inv_cooling
 

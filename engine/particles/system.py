@@ -27,9 +27,8 @@ class ParticleSystem:
         sol = cfg.solver
         self.method, self.adaptive, self.stats = sol.integrator, sol.adaptive, stats
         self.layout = PoolLayout.for_emitters(cfg.emitters, 1.0 / cfg.fps)
-        self.emitters = Emitters(cfg.emitters, self.layout, None, cfg.seed)
+        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed)
         self.state = ParticleState(self.layout.capacity, self.adaptive, self.emitters.uses_events)
-        self.emitters.state = self.state
         self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag)
         self.colliders = colliders
         self.moving_colliders = any(s.path for s in colliders.specs)
@@ -37,7 +36,7 @@ class ParticleSystem:
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
                                              self.method, self.adaptive,
                                              events=self.emitters.uses_events, contacts=contacts)
-        self.emitters.build()
+        self.emitters.build(self.state)
         self.h_last = sol.h
         if self.adaptive:
             self.controller = StepDoublingController(order=METHODS[self.method].order)

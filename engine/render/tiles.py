@@ -130,11 +130,7 @@ class TiledSplat:
     def _build(self, S, look, targets):
         W, H, cap = self.W, self.H, self.cap
         TX, T, chunk = self.tiles_x, self.tiles, self.chunk
-        pos, vel, age, life, alive, pem, prand = (
-            S.particle_pos, S.particle_vel, S.particle_age, S.particle_life, S.particle_alive,
-            S.particle_emitter, S.particle_rand)
-        color_at, alpha_at, size_at = look.color_at, look.alpha_at, look.size_at
-        additive, streak, size_rand = look.additive, look.streak, look.size_rand
+        additive, streak = look.additive, look.streak
         uses_alpha, uses_add = look.uses_alpha, look.uses_additive
         light, oit_rgb, oit_w, oit_logT, depth = targets
         geom, slook, tail, info, tiles, softf = (self.spr_geom, self.spr_look, self.spr_tail,
