@@ -137,7 +137,7 @@ def test_independent_scenes_in_one_process_and_rebuilds_keep_particles():
 
 
 def test_game_example_runs_headless():
-    from engine.examples.sphere_game import run_headless
+    from engine.tools.examples.sphere_game import run_headless
 
     scene, player, log = run_headless(200, quiet=True)
     assert any("landed" in line for line in log)

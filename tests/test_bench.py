@@ -2,8 +2,8 @@
 No timing assertions (the machines are noisy)."""
 import math
 
-from engine import bench
-from engine.bench import cloth
+from engine.tools import bench
+from engine.tools.bench import cloth
 
 EXPECTED = {
     "step": ["engine step 20k", "fused kernel alone 20k", "NumPy in-place 20k", "bandwidth limit 20k",

@@ -8,10 +8,10 @@ import pytest
 pytest.importorskip("matplotlib")
 pytest.importorskip("scipy")
 
-from engine.charts import run_charts  # noqa: E402
-from engine.charts.workprec import FIELDS, fixed_slope  # noqa: E402
+from engine.tools.charts import run_charts  # noqa: E402
+from engine.tools.charts.workprec import FIELDS, fixed_slope  # noqa: E402
 from engine.ode import solve  # noqa: E402
-from engine.ode.problems import DAMPED_SPRING  # noqa: E402
+from engine.tools.problems import DAMPED_SPRING  # noqa: E402
 
 
 @pytest.fixture(scope="module")

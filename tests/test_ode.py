@@ -11,7 +11,7 @@ import taichi as ti
 
 from engine.ode import METHODS, TABLEAUS, ButcherTableau, StepDoublingController, solve
 from engine.ode.controller import clip_to_target
-from engine.ode.problems import GROWTH, LOTKA_VOLTERRA, OSCILLATOR
+from engine.tools.problems import GROWTH, LOTKA_VOLTERRA, OSCILLATOR
 from engine.ode.steppers import doubling_step
 
 

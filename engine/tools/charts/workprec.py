@@ -14,8 +14,8 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from ..ode import METHODS, solve
-from ..ode.problems import DAMPED_SPRING, DRAG, KEPLER, LOTKA_VOLTERRA, Problem
+from ...ode import METHODS, solve
+from ..problems import DAMPED_SPRING, DRAG, KEPLER, LOTKA_VOLTERRA, Problem
 
 FIELDS = ["problem", "method", "mode", "h_or_tol", "nfev", "wall_s", "error"]
 FIXED_METHODS = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]

@@ -8,7 +8,7 @@ from .common import Row, time_median
 
 
 def run(quick: bool = False):
-    from ..springs import SpringSystem, cloth
+    from ...springs import SpringSystem, cloth
 
     n = 32 if quick else 128
     reps = 2 if quick else 5

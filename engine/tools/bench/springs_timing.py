@@ -1,7 +1,7 @@
 """Spring-network timings on this machine: gather vs atomic force accumulation, and ms per 1/60 s
 frame for a 128×128 cloth (structural + shear + bend) with symplectic Euler + auto substeps vs XPBD.
 
-    TI_SKIP_VERSION_CHECK=ON python -m engine.springs.bench [n]   (the cloth row of `particles bench` uses it)
+    TI_SKIP_VERSION_CHECK=ON python -m engine.tools.bench.springs_timing [n]   (the cloth row of `particles bench` uses it)
 Medians of several repeats after a warm-up call (compile excluded). Not a test: numbers vary ±20%.
 """
 import statistics

@@ -98,8 +98,8 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
 
 
 def main(argv=None) -> int:
-    """Manual runs: ``python -m engine.charts [--out DIR] [--quick] [--only NAME]``."""
-    ap = argparse.ArgumentParser(prog="python -m engine.charts", description=__doc__.split("\n")[0])
+    """Manual runs: ``python -m engine.tools.charts [--out DIR] [--quick] [--only NAME]``."""
+    ap = argparse.ArgumentParser(prog="python -m engine.tools.charts", description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=os.path.join("renders", "charts"))
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", action="append", default=None, metavar="NAME")

@@ -12,17 +12,17 @@ import time
 
 import numpy as np
 
-from ..ode.steppers import METHODS, doubling_fevals
+from .. import CONFIGS
+from ...ode.steppers import METHODS, doubling_fevals
 
 FIXED = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]
 
 
 def _sparks_run(overrides, seconds):
-    from ..config import load_config
-    from ..scene import Scene
+    from ...config import load_config
+    from ...scene import Scene
 
-    here = os.path.dirname(os.path.abspath(__file__))
-    path = os.path.join(here, "..", "..", "configs", "sparks.toml")
+    path = os.path.join(CONFIGS, "sparks.toml")
     cfg = load_config(path, overrides)
     s = Scene(cfg, render=False)
     t0 = time.perf_counter()
@@ -59,12 +59,12 @@ def sparks_rows(quick=False):
 
 
 def cloth_rows(quick=False):
-    from ..springs import SpringSystem, cloth
+    from ...springs import SpringSystem, cloth
 
     n, T = (8, 0.3) if quick else (16, 1.0)
     top = lambda: cloth(n, n, size=(1.0, 1.0), plane="xy", ks=1e3, kd=0.01, mass=0.01, pin="corners")  # noqa: E731
 
-    from ..springs import SimulationDiverged
+    from ...springs import SimulationDiverged
 
     def run(method, h):
         s = SpringSystem(top(), integrator=method, h=h, check_stability=False)

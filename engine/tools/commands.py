@@ -6,8 +6,8 @@ import os
 import sys
 import time
 
-from .cli import OutputFailure, SimulationError, Stopped, UserError
-from .config import ConfigError, load_config, read_toml
+from .errors import OutputFailure, SimulationError, Stopped, UserError
+from ..config import ConfigError, load_config, read_toml
 
 OUTPUT_ROOT = "renders"
 
@@ -88,9 +88,9 @@ class Progress:
 
 def _open_output(cfg, args, out_dir) -> int:
     """Prepare the output folder; returns the first frame to render (> 0 only with --resume)."""
-    from . import runtime
-    from .render.output import OutputError, OutputRefused, prepare_dir
-    from .render.resume import prepare_resume, run_record, write_record
+    from .. import runtime
+    from ..render.output import OutputError, OutputRefused, prepare_dir
+    from ..render.resume import prepare_resume, run_record, write_record
 
     if args.resume and args.overwrite:
         raise UserError("--resume and --overwrite: choose one")
@@ -113,8 +113,8 @@ def _open_output(cfg, args, out_dir) -> int:
 
 
 def cmd_run(args) -> int:
-    from .render.output import FrameWriter, OutputError
-    from .scene import DivergenceError, Scene
+    from ..render.output import FrameWriter, OutputError
+    from ..scene import DivergenceError, Scene
     from .signals import StopRequest
 
     cfg = load_scene_config(args.config, args)

@@ -3,7 +3,7 @@ from typing import List
 
 import numpy as np
 
-from ..ode.stability import largest_stable_h_batch, numerics_formula, theory_limit
+from ...ode.stability import largest_stable_h_batch, numerics_formula, theory_limit
 
 METHODS = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]
 KDS = (0.0, 1.0, 20.0)

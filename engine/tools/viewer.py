@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from .cli import UserError
+from .errors import UserError
 
 
 def has_display() -> bool:
@@ -60,7 +60,7 @@ def run_viewer(make_scene, title: str, frames: int | None = None, screenshot: st
     scene itself and the viewer only draws. Returns figures for the caller."""
     import taichi as ti
 
-    from .api import FixedTimestep
+    from ..api import FixedTimestep
 
     if not has_display():
         raise UserError("view: no display (DISPLAY is not set): run it from a desktop session or under "
@@ -122,8 +122,8 @@ def run_viewer(make_scene, title: str, frames: int | None = None, screenshot: st
 
 
 def cmd_view(args) -> int:
-    from .api import ParticleScene
-    from .config import ConfigError
+    from ..api import ParticleScene
+    from ..config import ConfigError
 
     def make():
         try:

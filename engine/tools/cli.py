@@ -7,36 +7,14 @@ import argparse
 import os
 import sys
 
-EXIT_OK, EXIT_BAD_INPUT, EXIT_SIM_FAILED, EXIT_OUTPUT_FAILED = 0, 2, 3, 4
-
-
-class UserError(Exception):
-    """A message for the user, never shown with a traceback: one line per problem."""
-
-    exit_code = EXIT_BAD_INPUT
-
-
-class SimulationError(UserError):
-    exit_code = EXIT_SIM_FAILED
-
-
-class OutputFailure(UserError):
-    exit_code = EXIT_OUTPUT_FAILED
-
-
-class Stopped(UserError):
-    """Stopped by a signal after writing the frames already simulated: exit 128 + signum."""
-
-    def __init__(self, message, signum):
-        super().__init__(message)
-        self.exit_code = 128 + int(signum)
+from .errors import EXIT_OK, SimulationError, UserError
 
 
 def _cmd_ode(args) -> int:
     import numpy as np
 
-    from .ode import METHODS, solve
-    from .ode.problems import PROBLEMS
+    from ..ode import METHODS, solve
+    from .problems import PROBLEMS
 
     if args.problem not in PROBLEMS:
         raise UserError(f"problem: unknown value {args.problem!r}; allowed: {', '.join(PROBLEMS)}")
@@ -126,12 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("config")
     w.add_argument("--frames", type=int, default=None, help="close after this many frames")
     w.add_argument("--screenshot", default=None, help="save the last frame shown to this PNG")
-    w.set_defaults(func=lambda a: __import__("engine.viewer", fromlist=["x"]).cmd_view(a))
+    w.set_defaults(func=lambda a: __import__("engine.tools.viewer", fromlist=["x"]).cmd_view(a))
 
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
     g.add_argument("--out", default=os.path.join("renders", "gallery"))
     g.add_argument("--configs", default="configs")
-    g.set_defaults(func=lambda a: __import__("engine.gallery", fromlist=["x"]).cmd_gallery(a))
+    g.set_defaults(func=lambda a: __import__("engine.tools.gallery", fromlist=["x"]).cmd_gallery(a))
     return ap
 
 
@@ -168,7 +146,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     try:
         if not getattr(args, "no_taichi", False):
-            from . import runtime
+            from .. import runtime
 
             if args.threads is not None and args.threads < 1:
                 raise UserError(f"--threads: {args.threads} is not allowed: must be >= 1")

@@ -10,8 +10,8 @@ from typing import List
 import numpy as np
 import taichi as ti
 
-from ..ode import solve
-from ..ode.problems import OSCILLATOR
+from ...ode import solve
+from ..problems import OSCILLATOR
 
 METHODS = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]
 H = 1.0 / 64  # exactly representable; hω = 1/32 on the oscillator, hω_max < 1/32 on the chain

@@ -1,8 +1,8 @@
 """A game prototype: steer a ball through smoke and a hanging cloth; sparks fly where it hits the
 ground, and collision events print.
 
-    python -m engine.examples.sphere_game              # window: arrows/WASD move, space jumps
-    python -m engine.examples.sphere_game --headless --frames 240   # scripted input, no window
+    python -m engine.tools.examples.sphere_game              # window: arrows/WASD move, space jumps
+    python -m engine.tools.examples.sphere_game --headless --frames 240   # scripted input, no window
 
 The whole game is the loop below: read input, move the collider (its velocity is inferred, so it
 pushes smoke and cloth), step the scene, react to contacts.
@@ -110,7 +110,7 @@ def main(argv=None):
 
     import taichi as ti
 
-    from engine.viewer import run_viewer
+    from engine.tools.viewer import run_viewer
 
     player, log = Player(), []
 

@@ -40,8 +40,8 @@ def scene_config(n: int, streak: float = 0.0) -> dict:
 
 
 def build_scene(n: int, streak: float = 0.0, width: int = W, height: int = H, config=None):
-    from ..config import load_config
-    from ..scene import Scene
+    from ...config import load_config
+    from ...scene import Scene
 
     scene = Scene(load_config(config or scene_config(n, streak)), width=width, height=height)
     fill_steady(scene)

@@ -56,8 +56,8 @@ def _fill(S, x0, v0):
 
 
 def run_engine(n: int, tol: float):
-    from ..config import load_config
-    from ..scene import Scene
+    from ...config import load_config
+    from ...scene import Scene
 
     scene = Scene(load_config(config(n, tol)), render=False)
     x0, v0 = initial(n)

@@ -78,7 +78,7 @@ def work_precision_png(path, rows: List[dict], title: str, refs=()) -> str:
 
 def stability_png(path, rows: List[dict], table: dict) -> str:
     """One panel per kd: measured largest stable h (markers) and linear theory (lines)."""
-    from ..ode.stability import theory_limit
+    from ...ode.stability import theory_limit
 
     plt = require_matplotlib()
     kds = sorted({r["kd"] for r in rows})

@@ -22,7 +22,7 @@ _MODULES = {"step": "step", "frame": "frame", "ode": "ode_vs_scipy", "startup": 
 def run(quick: bool = False, only=None, echo=None):
     """Run the sections (all, or those named in ``only``) and return their rows in order.
     ``echo(text)`` is called with each section's rows as it finishes (progress for long runs)."""
-    from .. import runtime
+    from ... import runtime
 
     runtime.ensure_init()
     names = list(SECTIONS) if not only else list(only)

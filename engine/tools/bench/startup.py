@@ -12,10 +12,10 @@ import sys
 import tempfile
 import time
 
+from .. import CONFIGS, ROOT
 from .common import Row
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-CONFIG = os.path.join(ROOT, "configs", "sparks.toml")
+CONFIG = os.path.join(CONFIGS, "sparks.toml")
 
 
 def _run(cache: str, out: str) -> float:

@@ -46,8 +46,8 @@ def initial_state(n: int, seed: int = 0):
 
 
 def build_engine_scene(n: int):
-    from ..config import load_config
-    from ..scene import Scene
+    from ...config import load_config
+    from ...scene import Scene
 
     scene = Scene(load_config(scene_config(n)), render=False)
     S = scene.particles.state

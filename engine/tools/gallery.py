@@ -26,8 +26,8 @@ SHOTS = {
 
 
 def render_still(config_path: str, seconds: float, size, out_path: str) -> dict:
-    from .config import load_config
-    from .scene import Scene
+    from ..config import load_config
+    from ..scene import Scene
 
     cfg = load_config(config_path, {"render.width": size[0], "render.height": size[1]})
     t0 = time.perf_counter()
