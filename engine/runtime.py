@@ -77,6 +77,26 @@ def reset() -> None:
     _state["arch"] = None
 
 
+class Interrupted(Exception):
+    """Raised between steps when the stop check (a signal handler's flag) asks to stop."""
+
+
+_stop_check = [None]
+
+
+def set_stop_check(fn) -> None:
+    """``fn()`` -> bool, polled between steps (``None``: never stop). The command line installs
+    its signal flag here so SIGINT/SIGTERM stop a long frame mid-way, not only between frames."""
+    _stop_check[0] = fn
+
+
+def check_stop() -> None:
+    """Raise :class:`Interrupted` if the stop check says so. Cheap: one call per step batch."""
+    fn = _stop_check[0]
+    if fn is not None and fn():
+        raise Interrupted("stopped")
+
+
 def ensure_init() -> str:
     """Initialise with defaults unless already done (by the engine or by the host)."""
     return _state["arch"] or init("cpu")

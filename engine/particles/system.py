@@ -11,6 +11,7 @@ import math
 
 from ..ode.controller import StepDoublingController, clip_to_target
 from ..ode.steppers import METHODS
+from ..runtime import check_stop
 from .emitters import Emitters
 from .forces import Forces
 from .integrate import NO_FAILURE, ParticleIntegrator
@@ -56,6 +57,7 @@ class ParticleSystem:
         sol = self.cfg.solver
         steps = 0
         while t < t_target:
+            check_stop()
             if steps >= sol.max_steps_per_frame:
                 raise DivergenceError(
                     f"integrator {self.method}: more than {sol.max_steps_per_frame} steps in the frame "
@@ -94,6 +96,7 @@ class ParticleSystem:
             n = max(1, math.ceil(dt / self.cfg.solver.h - 1e-9))
             h = dt / n  # equal substeps that land exactly on the target
             for j in range(n):
+                check_stop()
                 self._step_fixed(t + j * h, h)
             self.stats.h_min = min(self.stats.h_min, h)
             self.stats.h_max = max(self.stats.h_max, h)

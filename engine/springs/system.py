@@ -19,7 +19,7 @@ import taichi as ti
 
 from ..ode.controller import StepDoublingController, clip_to_target
 from ..ode.steppers import METHODS
-from ..runtime import ensure_init
+from ..runtime import check_stop, ensure_init
 from .adaptive import DoublingBuffers
 from .constraints import NO_FAILURE, make_constraint_kernels
 from .energy import network_energy
@@ -116,6 +116,7 @@ class SpringSystem:
         if self.check_stability and self.integrator != "xpbd" and self.substeps != "auto":
             check_step(self.integrator, h, self.bounds, dt)
         for k in range(n):
+            check_stop()
             self._advance(h, (k + 1) / n)
             self._post((k + 1) / n, k, self.time + (k + 1) * h)
         self.step_sizes = [h] * n
@@ -147,6 +148,7 @@ class SpringSystem:
         h = self._h_next or min(dt, SAFETY * self.stable_step())
         t, k, sizes = 0.0, 0, []
         while t < dt:
+            check_stop()
             hs, lands = clip_to_target(t, h, dt)
             buf.save()
             self._advance(hs, (t + hs) / dt)
