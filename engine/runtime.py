@@ -30,13 +30,15 @@ def _host_initialised() -> bool:
         return False
 
 
-def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False) -> str:
+def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
+         kernel_profiler: bool = False) -> str:
     """Initialise Taichi once for this process and return the arch in use.
 
     ``arch`` is one of :data:`ARCHES`. Later calls are no-ops (a different arch after the first
     call raises, since fields already allocated cannot move). ``threads`` caps CPU threads.
     The offline cache stays on so a second run of the same scene starts fast; it lives where
     ``PARTICLES_TI_CACHE`` points (a folder) if set, else in Taichi's default place.
+    ``kernel_profiler`` turns on Taichi's per-kernel timer (``particles profile`` uses it).
     """
     if arch not in ARCHES:
         raise ValueError(f"arch: unknown value {arch!r}; allowed: {', '.join(ARCHES)}")
@@ -48,7 +50,8 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False) 
         _state["arch"] = "host"
         return "host"
     kwargs = dict(arch=getattr(ti, arch), default_fp=ti.f32, offline_cache=True,
-                  log_level=ti.WARN, debug=debug, random_seed=0)
+                  log_level=ti.WARN, debug=debug, random_seed=0,
+                  kernel_profiler=kernel_profiler)
     if os.environ.get("PARTICLES_TI_CACHE"):
         kwargs["offline_cache_file_path"] = os.environ["PARTICLES_TI_CACHE"]
     if threads and arch == "cpu":

@@ -106,6 +106,12 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--screenshot", default=None, help="save the last frame shown to this PNG")
     w.set_defaults(func=lambda a: __import__("engine.tools.viewer", fromlist=["x"]).cmd_view(a))
 
+    pr = sub.add_parser("profile", help="per-kernel milliseconds of a config's frames (game-style)")
+    pr.add_argument("config")
+    pr.add_argument("--size", default="1280x720", help="image size WxH (default 1280x720)")
+    pr.add_argument("--frames", type=int, default=20)
+    pr.set_defaults(func=_cmd_profile, kernel_profiler=True)
+
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
     g.add_argument("--out", default=os.path.join("renders", "gallery"))
     g.add_argument("--configs", default="configs")
@@ -122,6 +128,19 @@ def _cmd_chart(args) -> int:
         raise UserError(str(e)) from None
     for p in paths:
         print(p)
+    return EXIT_OK
+
+
+def _cmd_profile(args) -> int:
+    from .profile import profile
+
+    try:
+        w, h = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise UserError(f"--size: {args.size!r} is not WxH (e.g. 1280x720)") from None
+    if not (16 <= w <= 8192 and 16 <= h <= 8192) or args.frames < 1:
+        raise UserError(f"--size {args.size} / --frames {args.frames}: need 16..8192 pixels and >= 1 frame")
+    print(profile(args.config, w, h, args.frames))
     return EXIT_OK
 
 
@@ -150,7 +169,8 @@ def main(argv=None) -> int:
 
             if args.threads is not None and args.threads < 1:
                 raise UserError(f"--threads: {args.threads} is not allowed: must be >= 1")
-            runtime.init(getattr(args, "arch", "cpu"), threads=args.threads)
+            runtime.init(getattr(args, "arch", "cpu"), threads=args.threads,
+                         kernel_profiler=getattr(args, "kernel_profiler", False))
         return args.func(args)
     except UserError as e:
         for line in str(e).splitlines() or [e.__class__.__name__]:

@@ -134,7 +134,7 @@ def cmd_run(args) -> int:
                     break
                 scene.advance_frame()
                 if k >= first:  # --resume: frames before `first` are on disk already
-                    writer.submit(k, scene.render())
+                    writer.submit(k, scene.render()[..., :3])
                 progress.update(k + 1, scene.stats.alive)
         except DivergenceError as e:
             failure = e

@@ -35,7 +35,7 @@ def render_still(config_path: str, seconds: float, size, out_path: str) -> dict:
     frames = max(1, round(seconds * cfg.fps))
     for _ in range(frames):
         scene.advance_frame()
-    img = scene.render()
+    img = scene.render()[..., :3]
     tmp = out_path + ".tmp"
     Image.fromarray(img).save(tmp, format="PNG", optimize=True)
     os.replace(tmp, out_path)
