@@ -2,7 +2,8 @@
 
 After ``bin`` a tile's sprites lie contiguously in ``pairs[tile_start[t] : tile_start[t] +
 tile_count[t]]``, in slot order, as 16-float records (streamed by the splat instead of gathered
-by slot: one cache miss each). Tiles of both levels share one index space: level 0 (full
+by slot: one cache miss each): centre x, y, radius, depth | RGB, alpha | energy, tail x, y, OIT
+depth weight | kind (1 disc, −1 streak), additive, 1/soft-fade distance, 1/streak length². Tiles of both levels share one index space: level 0 (full
 resolution) tiles are [0, T0), level-1 (reduced buffer) tiles [T0, T0 + T1).
 
 No float atomics and nothing that depends on the thread count (PERF-NOTES: atomics are slow on
@@ -24,9 +25,10 @@ vec16 = ti.types.vector(16, ti.f32)
 
 
 def chunks_for(arch_is_cpu: bool) -> int:
-    """Slot chunks of the counting sort: a few per core on a CPU, many for a GPU's threads. A
-    constant per backend (never the thread count), so the order of records never changes."""
-    return 64 if arch_is_cpu else 1024
+    """Slot chunks of the counting sort: a few per core on a CPU (each costs a histogram row of
+    every tile to clear and scan), many for a GPU's threads. A constant per backend (never the
+    thread count), so the order of records never changes."""
+    return 16 if arch_is_cpu else 1024
 
 
 def build_binning_kernels(rec, capacity: int, chunks: int):
@@ -104,9 +106,12 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
                     b = tiles[i]
                     base, tx_n = tile_base(nf[2], T0, TX0, TX1)
                     g, lk, tl = geom[i], slook[i], tail[i]
+                    # a streak's 1/L² (for projecting pixels on it); 0 for a disc
+                    d2 = (tl[1] - g[0]) ** 2 + (tl[2] - g[1]) ** 2
+                    inv_l2 = ti.select(nf[0] < 0 and d2 > 1e-6, 1.0 / ti.max(d2, 1e-6), 0.0)
                     rec16 = ti.Vector([g[0], g[1], g[2], g[3], lk[0], lk[1], lk[2], lk[3],
                                        tl[0], tl[1], tl[2], tl[3], ti.cast(nf[0], ti.f32),
-                                       ti.cast(nf[1], ti.f32), softf[i], 0.0])
+                                       ti.cast(nf[1], ti.f32), softf[i], inv_l2])
                     for ty in range(b[1], b[3] + 1):
                         for tx in range(b[0], b[2] + 1):
                             t = base + ty * tx_n + tx

@@ -27,7 +27,7 @@ import numpy as np
 import taichi as ti
 
 from .sprites import TILE
-from .splat import add_sprite, disc_weight, record_box, record_disc
+from .splat import add_sprite, capsule_point, disc_weight, record_box
 
 LUT_SIZE = 16384
 LUT_MAX = 8.0
@@ -96,59 +96,101 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
         return pack(c * exposure, 1.0 - (1.0 - cover) * lo[3] * full[3])
 
     @ti.func
-    def lo_sample(px, py, z, lo: ti.template(), depth_lo: ti.template(), LO, Wl, Hl, s):
-        """The reduced layer at full-resolution pixel (px, py) of depth z: bilinear, and where the
-        four texels' depths differ by more than 10 % (an edge, not a receding floor), bilateral: each weighs bilinear × 1 / (10⁻³ +
-        |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface."""
-        u = (px + 0.5) * s - 0.5
+    def lo_sample(px, py, z, lo: ti.template(), rows: ti.template(), depth_lo: ti.template(), LO, W,
+                  Wl, Hl, s, edge):
+        """The reduced layer at full-resolution pixel (px, py) of depth z, bilinear: a vertical
+        lerp between two rows already interpolated along x (``lo_rows``). In a tile where the
+        reduced depths differ by more than 10 % (``edge``: a silhouette, not a receding floor) and
+        at this pixel too, bilateral instead: each of the four texels weighs bilinear ×
+        1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface."""
         v = (py + 0.5) * s - 0.5
-        i0 = ti.cast(ti.floor(u), ti.i32)
         j0 = ti.cast(ti.floor(v), ti.i32)
-        fx, fy = u - i0, v - j0
-        xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
-        ra = LO + ti.min(ti.max(j0, 0), Hl - 1) * Wl
-        rb = LO + ti.min(ti.max(j0 + 1, 0), Hl - 1) * Wl
-        w00, w10 = (1.0 - fx) * (1.0 - fy), fx * (1.0 - fy)
-        w01, w11 = (1.0 - fx) * fy, fx * fy
-        z00, z10, z01, z11 = depth_lo[ra + xa], depth_lo[ra + xb], depth_lo[rb + xa], depth_lo[rb + xb]
-        if ti.max(z00, z10, z01, z11) - ti.min(z00, z10, z01, z11) > 0.1 * z:  # an edge
-            iz = 1.0 / z
-            w00 = w00 / (1e-3 + ti.abs(z00 - z) * iz)
-            w10 = w10 / (1e-3 + ti.abs(z10 - z) * iz)
-            w01 = w01 / (1e-3 + ti.abs(z01 - z) * iz)
-            w11 = w11 / (1e-3 + ti.abs(z11 - z) * iz)
-            norm = 1.0 / (w00 + w10 + w01 + w11)
-            w00, w10, w01, w11 = w00 * norm, w10 * norm, w01 * norm, w11 * norm
-        return w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa] + w11 * lo[rb + xb]
+        fy = v - j0
+        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+        out = (1.0 - fy) * rows[ja * W + px] + fy * rows[jb * W + px]
+        if edge != 0:
+            u = (px + 0.5) * s - 0.5
+            i0 = ti.cast(ti.floor(u), ti.i32)
+            fx = u - i0
+            xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+            ra, rb = LO + ja * Wl, LO + jb * Wl
+            z00, z10 = depth_lo[ra + xa], depth_lo[ra + xb]
+            z01, z11 = depth_lo[rb + xa], depth_lo[rb + xb]
+            if ti.max(z00, z10, z01, z11) - ti.min(z00, z10, z01, z11) > 0.1 * z:
+                iz = 1.0 / z
+                w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(z00 - z) * iz)
+                w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(z10 - z) * iz)
+                w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(z01 - z) * iz)
+                w11 = fx * fy / (1e-3 + ti.abs(z11 - z) * iz)
+                out = (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa]
+                       + w11 * lo[rb + xb]) / (w00 + w10 + w01 + w11)
+        return out
 
     @ti.func
-    def deposit(px0, py0, px1, py1, rec, s, accA: ti.template(), accB: ti.template(),
+    def lo_edge(px0, py0, px1, py1, depth_lo: ti.template(), LO, Wl, Hl, s):
+        """Whether the reduced depths a tile's upsample reads differ by more than 10 % (then the
+        bilateral weights are needed; elsewhere bilinear is the same and cheaper)."""
+        lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * s - 0.5), ti.i32))
+        lx1 = ti.min(Wl - 1, ti.cast(ti.floor((px1 + 0.5) * s - 0.5), ti.i32) + 1)
+        ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * s - 0.5), ti.i32))
+        ly1 = ti.min(Hl - 1, ti.cast(ti.floor((py1 + 0.5) * s - 0.5), ti.i32) + 1)
+        lo_z, hi_z = 1e30, 0.0
+        for ly in range(ly0, ly1 + 1):
+            for k in range(LO + ly * Wl + lx0, LO + ly * Wl + lx1 + 1):
+                lo_z = ti.min(lo_z, depth_lo[k])
+                hi_z = ti.max(hi_z, depth_lo[k])
+        return ti.select(hi_z - lo_z > 0.1 * lo_z, 1, 0)
+
+    @ti.func
+    def deposit(px0, py0, px1, py1, rec, accA: ti.template(), accB: ti.template(),
                 dep: ti.template(), base, W):
-        """Disc s of a record onto the pixels of [px0, px1] × [py0, py1] it covers."""
-        cx, cy, a, energy = record_disc(rec, s)
-        rad = rec[2]
-        x0 = ti.max(px0, ti.cast(ti.floor(cx - rad), ti.i32))
-        x1 = ti.min(px1, ti.cast(ti.floor(cx + rad), ti.i32))
-        y0 = ti.max(py0, ti.cast(ti.floor(cy - rad), ti.i32))
-        y1 = ti.min(py1, ti.cast(ti.floor(cy + rad), ti.i32))
-        if x0 <= x1 and y0 <= y1:
-            inv_r2 = 1.0 / (rad * rad)
-            col = ti.Vector([rec[4], rec[5], rec[6]])
-            is_add = rec[13] != 0.0
-            span = ti.max(x1 - x0, y1 - y0)
-            if span < 2:
-                block(2, x0, y0, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB, dep, base, W)
-            elif span < 4:
-                block(4, x0, y0, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB, dep, base, W)
-            else:  # large discs are few: one inlined pixel keeps the kernel (and its build) small
-                for yy in range(y0, y1 + 1):
-                    # only the row's span inside the circle (a box wastes 1 − π/4 of its pixels)
-                    dy = yy + 0.5 - cy
-                    half = ti.sqrt(ti.max(0.0, rad * rad - dy * dy))
-                    for xx in range(ti.max(x0, ti.cast(ti.floor(cx - half), ti.i32)),
-                                    ti.min(x1, ti.cast(ti.floor(cx + half), ti.i32)) + 1):
-                        pixel(xx, yy, True, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB,
-                              dep, base, W)
+        """A record onto the pixels of [px0, px1] × [py0, py1] it covers."""
+        cx, cy, rad = rec[0], rec[1], rec[2]
+        inv_r2 = 1.0 / (rad * rad)
+        col = ti.Vector([rec[4], rec[5], rec[6]])
+        is_add = rec[13] != 0.0
+        if rec[12] < 0:  # a streak: each row's span of the capsule, one weight per pixel
+            tx, ty = rec[9], rec[10]
+            y0 = ti.max(py0, ti.cast(ti.floor(ti.min(cy, ty) - rad), ti.i32))
+            y1 = ti.min(py1, ti.cast(ti.floor(ti.max(cy, ty) + rad), ti.i32))
+            for yy in range(y0, y1 + 1):
+                # the part of the segment within rad of this row, widened by rad
+                lo_t, hi_t = 0.0, 1.0
+                if ti.abs(ty - cy) > 1e-6:
+                    ta = (yy + 0.5 - rad - cy) / (ty - cy)
+                    tb = (yy + 0.5 + rad - cy) / (ty - cy)
+                    lo_t = ti.max(0.0, ti.min(ta, tb))
+                    hi_t = ti.min(1.0, ti.max(ta, tb))
+                xa, xb = cx + lo_t * (tx - cx), cx + hi_t * (tx - cx)
+                x0 = ti.max(px0, ti.cast(ti.floor(ti.min(xa, xb) - rad), ti.i32))
+                x1 = ti.min(px1, ti.cast(ti.floor(ti.max(xa, xb) + rad), ti.i32))
+                for xx in range(x0, x1 + 1):
+                    qx, qy, fade = capsule_point(xx, yy, rec)
+                    pixel(xx, yy, True, qx, qy, inv_r2, rec, col, rec[7] * fade, is_add, rec[8],
+                          accA, accB, dep, base, W)
+        else:
+            x0 = ti.max(px0, ti.cast(ti.floor(cx - rad), ti.i32))
+            x1 = ti.min(px1, ti.cast(ti.floor(cx + rad), ti.i32))
+            y0 = ti.max(py0, ti.cast(ti.floor(cy - rad), ti.i32))
+            y1 = ti.min(py1, ti.cast(ti.floor(cy + rad), ti.i32))
+            if x0 <= x1 and y0 <= y1:
+                a, energy = rec[7], rec[8]
+                span = ti.max(x1 - x0, y1 - y0)
+                if span < 2:
+                    block(2, x0, y0, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB,
+                          dep, base, W)
+                elif span < 4:
+                    block(4, x0, y0, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB,
+                          dep, base, W)
+                else:  # large discs are few: one inlined pixel keeps the kernel (and its build) small
+                    for yy in range(y0, y1 + 1):
+                        # only the row's span inside the circle (a box wastes 1 − π/4 of its pixels)
+                        dy = yy + 0.5 - cy
+                        half = ti.sqrt(ti.max(0.0, rad * rad - dy * dy))
+                        for xx in range(ti.max(x0, ti.cast(ti.floor(cx - half), ti.i32)),
+                                        ti.min(x1, ti.cast(ti.floor(cx + half), ti.i32)) + 1):
+                            pixel(xx, yy, True, cx, cy, inv_r2, rec, col, a, is_add, energy, accA,
+                                  accB, dep, base, W)
 
     @ti.func
     def block(Bn: ti.template(), bx, by, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy,
@@ -187,9 +229,7 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                 if ti.static(uses_alpha):
                     accB[x] = ti.Vector([0.0, 0.0, 0.0, 0.0])
         for j in range(tile_start[t], tile_start[t] + tile_count[t]):
-            rec = pairs[j]
-            for s in range(ti.abs(ti.cast(rec[12], ti.i32))):
-                deposit(px0, py0, px1, py1, rec, s, accA, accB, dep, base, W)
+            deposit(px0, py0, px1, py1, pairs[j], accA, accB, dep, base, W)
 
     @ti.func
     def splat_pixel(t, px, py, pairs: ti.template(), tile_count: ti.template(),
@@ -203,10 +243,12 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
             if px + 1.0 >= x0 and px <= x1 and py + 1.0 >= y0 and py <= y1:
                 col = ti.Vector([rec[4], rec[5], rec[6]])
                 inv_r2 = 1.0 / (rec[2] * rec[2])
-                for s in range(ti.abs(ti.cast(rec[12], ti.i32))):
-                    cx, cy, a, energy = record_disc(rec, s)
-                    w = disc_weight(px, py, cx, cy, inv_r2, rec[3], z_here, energy, rec[14])
-                    A, B = add_sprite(A, B, w, col, a, rec[13] != 0.0, rec[11], uses_add, uses_alpha)
+                cx, cy, a = rec[0], rec[1], rec[7]
+                if rec[12] < 0:
+                    qx, qy, fade = capsule_point(px, py, rec)
+                    cx, cy, a = qx, qy, a * fade
+                w = disc_weight(px, py, cx, cy, inv_r2, rec[3], z_here, rec[8], rec[14])
+                A, B = add_sprite(A, B, w, col, a, rec[13] != 0.0, rec[11], uses_add, uses_alpha)
         return A, B
 
     @ti.func
@@ -272,7 +314,21 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
             accA[k] = layer(A, B, shading)
 
     @ti.kernel
-    def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, bgc: ND_V4, dep: ND_F,
+    def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32):
+        """The reduced layer's rows interpolated along x at every full-resolution column:
+        rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
+        vertical half with two loads per pixel instead of four)."""
+        LO = W * H
+        for j in range(Hl):
+            for x in range(W):
+                u = (x + 0.5) * s - 0.5
+                i0 = ti.cast(ti.floor(u), ti.i32)
+                fx = u - i0
+                xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+                rows[j * W + x] = (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
+
+    @ti.kernel
+    def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, bgc: ND_V4, dep: ND_F,
                         bg_packed: ND_U32, out: ND_U32, dirty: ND_I1, touched_lo: ND_I1,
                         TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32, Wl: ti.i32,
                         Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32, shading: ti.f32,
@@ -292,20 +348,38 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                     for k in range(y * W + px0, y * W + px1 + 1):
                         out[k] = bg_packed[k]
             else:
-                for y in range(py0, py1 + 1):
-                    for x in range(px0, px1 + 1):
-                        k = y * W + x
-                        full = EMPTY_LAYER
-                        if n > 0:
-                            full = acc_layer(accA, accB, k, shading)
-                        low = EMPTY_LAYER
-                        if near != 0:
-                            low = lo_sample(x, y, dep[k], accA, dep, W * H, Wl, Hl, s)
-                        out[k] = finish(bgc[k], low, full, exposure, transparent)
+                edge = 0
+                if near != 0:
+                    edge = lo_edge(px0, py0, px1, py1, dep, W * H, Wl, Hl, s)
+                if n == 0 and edge == 0 and near != 0:
+                    # the common case under smoke: the reduced layer alone, bilinear; the row
+                    # terms hoisted by hand (two loads and a lerp per pixel)
+                    for y in range(py0, py1 + 1):
+                        v = (y + 0.5) * s - 0.5
+                        j0 = ti.cast(ti.floor(v), ti.i32)
+                        fy = v - j0
+                        ra = ti.min(ti.max(j0, 0), Hl - 1) * W
+                        rb = ti.min(ti.max(j0 + 1, 0), Hl - 1) * W
+                        for x in range(px0, px1 + 1):
+                            low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
+                            out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
+                                                    transparent)
+                else:
+                    for y in range(py0, py1 + 1):
+                        for x in range(px0, px1 + 1):
+                            k = y * W + x
+                            full = EMPTY_LAYER
+                            if n > 0:
+                                full = acc_layer(accA, accB, k, shading)
+                            low = EMPTY_LAYER
+                            if near != 0:
+                                low = lo_sample(x, y, dep[k], accA, rows, dep, W * H, W, Wl, Hl, s,
+                                                edge)
+                            out[k] = finish(bgc[k], low, full, exposure, transparent)
 
     @ti.kernel
     def composite_pixels(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,
-                         bgc: ND_V4, dep: ND_F, bg_packed: ND_U32, out: ND_U32, dirty: ND_I1,
+                         rows: ND_V4, bgc: ND_V4, dep: ND_F, bg_packed: ND_U32, out: ND_U32, dirty: ND_I1,
                          touched_lo: ND_I1, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
                          Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
                          shading: ti.f32, transparent: ti.i32):
@@ -328,7 +402,9 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                     full = layer(A, B, shading)
                 low = EMPTY_LAYER
                 if near != 0:
-                    low = lo_sample(px, py, dep[k], accA, dep, W * H, Wl, Hl, s)
+                    edge = lo_edge(tx * TILE, ty * TILE, ti.min(W - 1, tx * TILE + TILE - 1),
+                                   ti.min(H - 1, ty * TILE + TILE - 1), dep, W * H, Wl, Hl, s)
+                    low = lo_sample(px, py, dep[k], accA, rows, dep, W * H, W, Wl, Hl, s, edge)
                 out[k] = finish(bgc[k], low, full, exposure, transparent)
 
     @ti.kernel
@@ -338,6 +414,6 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
         for k in range(n):
             bg_packed[k] = finish(bgc[k], EMPTY_LAYER, EMPTY_LAYER, exposure, transparent)
 
-    return dict(splat_tiles=splat_tiles, splat_pixels_lo=splat_pixels_lo,
+    return dict(splat_tiles=splat_tiles, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
                 composite_tiles=composite_tiles, composite_pixels=composite_pixels,
                 pack_background=pack_background)

@@ -129,7 +129,7 @@ def _build(m: MeshLayer):
             dirty[t] = 0
         for y in range(H):
             for k in range(y * W, y * W + W):
-                vis[k] = EMPTY
+                vis[k] = ti.i64(EMPTY)
                 lines[k] = ti.Vector([0, 0, 0, 0])
 
     @ti.kernel
@@ -151,7 +151,7 @@ def _build(m: MeshLayer):
                         w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
                         if w0 >= 0 and w1 >= 0 and w2 >= 0:
                             z = 1.0 / (w0 / a[2] + w1 / b[2] + w2 / c[2])  # 1/z is linear on screen
-                            key = (ti.cast(ti.bit_cast(z - DEPTH_BIAS, ti.i32), ti.i64) << 32) | t
+                            key = (ti.cast(ti.bit_cast(z - DEPTH_BIAS, ti.i32), ti.i64) << 32) | ti.cast(t, ti.i64)
                             ti.atomic_min(vis[py * W + px], key)
                             dirty[(py // TILE) * TX + px // TILE] = 1  # same value from any thread
         # (positive floats order like their bit patterns, so the integer minimum is the nearest)
@@ -160,7 +160,7 @@ def _build(m: MeshLayer):
     def tri_depth(vis: ti.template(), i):
         k = vis[i]
         z = 1e30
-        if k != EMPTY:
+        if k != ti.i64(EMPTY):
             z = ti.bit_cast(ti.cast(k >> 32, ti.i32), ti.f32)
         return z
 

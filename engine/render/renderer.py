@@ -137,12 +137,14 @@ class Renderer:
         has_lo = self._splat(t, cam, dep) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading,
                   transparent)
+        if has_lo:
+            self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale)
         if self.schedule == "tiles":
-            self._k["composite_tiles"](t.tile_count, t.accA, t.accB, bgc, dep, t.bg_packed, packed,
-                                       t.dirty, t.touched_lo, *common)
+            self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, bgc, dep, t.bg_packed,
+                                       packed, t.dirty, t.touched_lo, *common)
         else:
-            self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, bgc, dep,
-                                        t.bg_packed, packed, t.dirty, t.touched_lo, *common)
+            self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,
+                                        dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)
         return image
 
     def _splat(self, t: FrameTargets, cam, dep) -> int:

@@ -46,25 +46,17 @@ def add_sprite(A, B, w, col, a, is_add, wzf, uses_add: ti.template(), uses_alpha
 
 
 @ti.func
-def record_disc(rec, s):
-    """The s-th disc of a 16-float sprite record (engine.render.binning): a streak (nsub < 0) is
-    −nsub discs along it, fading (alpha × (1 − 0.6 a), energy split 2/n); else the one disc.
-    Returns (cx, cy, alpha, energy)."""
-    nsub = ti.cast(rec[12], ti.i32)
-    cx, cy, a, energy = rec[0], rec[1], rec[7], rec[8]
-    if nsub < 0:
-        n = -nsub
-        a_s = (s + 0.5) / n
-        cx = rec[0] + a_s * (rec[9] - rec[0])
-        cy = rec[1] + a_s * (rec[10] - rec[1])
-        a = rec[7] * (1.0 - 0.6 * a_s)
-        energy = rec[8] * 2.0 / n
-    return cx, cy, a, energy
+def capsule_point(xx, yy, rec):
+    """For a streak record (kind −1): the point of its segment nearest to the centre of pixel
+    (xx, yy), and the alpha factor there (1 at the head, 0.4 at the tail: the motion blur fades)."""
+    dx, dy = rec[9] - rec[0], rec[10] - rec[1]
+    t = ti.math.clamp(((xx + 0.5 - rec[0]) * dx + (yy + 0.5 - rec[1]) * dy) * rec[15], 0.0, 1.0)
+    return rec[0] + t * dx, rec[1] + t * dy, 1.0 - 0.6 * t
 
 
 @ti.func
 def record_box(rec):
-    """Pixel-space bounding box (x0, y0, x1, y1) of a record's discs, as floats."""
+    """Pixel-space bounding box (x0, y0, x1, y1) of a record's disc or capsule, as floats."""
     r = rec[2]
     x_lo, x_hi, y_lo, y_hi = rec[0], rec[0], rec[1], rec[1]
     if rec[12] < 0:

@@ -1,12 +1,13 @@
 """How a particle becomes a sprite: the one definition both splat schedules use.
 
-A sprite is a soft disc (or a streak of discs along the velocity) sized in world units, so a far
-particle is smaller. ``build_sprite_kernel`` turns every live slot into a record once per frame:
+A sprite is a soft disc (or a streak: a capsule back along the velocity, motion blur) sized in
+world units, so a far particle is smaller. ``build_sprite_kernel`` turns every live slot into a record once per frame:
 
 * ``spr_geom``  (cap,) vec4 f32: centre x, y (px of its level's image), radius (px), view depth z (m)
 * ``spr_look``  (cap,) vec4 f32: linear RGB, alpha
 * ``spr_tail``  (cap,) vec4 f32: energy (sub-pixel light kept), streak tail x, y (px), OIT depth weight
-* ``spr_info``  (cap,) vec4 i32: discs (0 not drawn, > 0 one disc, < 0 a streak of −n discs),
+* ``spr_info``  (cap,) vec4 i32: kind (0 not drawn, 1 a disc, −1 a streak: a capsule from the
+  centre to the tail),
   additive (0/1), level (0 full resolution, 1 the reduced off-screen buffer), unused
 * ``spr_soft``  (cap,) f32: 1 / the soft-particle fade distance (1/m); the fade distance is half
   the sprite's world size
@@ -125,7 +126,12 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
                         tx = (tpos.dot(r) * st_scale + 0.5 * W) * s
                         ty = (0.5 * H - tpos.dot(u) * st_scale) * s
                         length = ti.sqrt((tx - cx) ** 2 + (ty - cy) ** 2)
-                        nsub = -(ti.min(32, ti.cast(length / ti.max(0.5 * rad, 0.5), ti.i32) + 1))
+                        nsub = -1
+                        # a capsule carrying twice a disc's light (as the streak of discs it
+                        # replaced did): ∫ disc = πr²/3, ∫ capsule = 16rL/15 + πr²/3 for the
+                        # profile (1 − d²/r²)²
+                        disc = 3.14159265 * rad * rad / 3.0
+                        energy *= 2.0 * disc / (16.0 * rad * length / 15.0 + disc)
                     # pixel bounds (padded by 1/64 px for rounding along a streak), clamped in
                     # float before the integer cast
                     lox = ti.max(-1.0, ti.min(Wl + 1.0, ti.min(cx, tx) - rad - 0.015625))

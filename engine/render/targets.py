@@ -56,6 +56,7 @@ class FrameTargets:
         self.accA = ti.ndarray(vec4, shape=both)
         self.accA.fill(ti.Vector([0.0, 0.0, 0.0, 1.0]))  # the empty layer (see composite.splat_tiles)
         self.accB = ti.ndarray(vec4, shape=both if alpha else 1)
+        self.lo_rows = ti.ndarray(vec4, shape=self.Hl * W if self.has_lo else 1)
         self.touched_lo = ti.ndarray(ti.i32, shape=max(1, self.T1))
         self.touched_lo.fill(0)
         self.hist = ti.ndarray(ti.i32, shape=(chunks, self.T))
