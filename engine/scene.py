@@ -107,13 +107,14 @@ class Scene:
             self.stats.peak_alive = max(self.stats.peak_alive, alive)
 
     def render(self, width=None, height=None, camera=None, show_colliders=None, *, out=None,
-               transparent=False) -> np.ndarray:
+               transparent=False, bgra=False) -> np.ndarray:
         """(H, W, 4) uint8 RGBA image of the current state (into ``out`` if given); any size and
         camera, compiled once (engine.render.renderer)."""
         if self.renderer is None:
             raise RuntimeError("render: this scene was built with render=False")
         return self.renderer.render(camera or self.camera, width or self.width, height or self.height,
-                                    out=out, show_colliders=show_colliders, transparent=transparent)
+                                    out=out, show_colliders=show_colliders, transparent=transparent,
+                                    bgra=bgra)
 
     # -- read-back ----------------------------------------------------------------------------
     @property

@@ -58,13 +58,16 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
     lut.from_numpy(tonemap_table())
 
     @ti.func
-    def pack(c, alpha):
-        """Linear RGB (exposure applied) → ACES → sRGB 8 bits by table, with alpha, as u32 RGBA."""
+    def pack(c, alpha, bgra):
+        """Linear RGB (exposure applied) → ACES → sRGB 8 bits by table, with alpha, as one u32:
+        bytes R, G, B, A in memory (``bgra`` 0) or B, G, R, A (windowing systems' order)."""
         v = ti.sqrt(ti.math.clamp(c, 0.0, LUT_MAX) * (1.0 / LUT_MAX)) * (LUT_SIZE - 1) + 0.5
         r = ti.cast(lut[ti.cast(v[0], ti.i32)], ti.u32)
         g = ti.cast(lut[ti.cast(v[1], ti.i32)], ti.u32)
         b = ti.cast(lut[ti.cast(v[2], ti.i32)], ti.u32)
         a = ti.cast(ti.min(255.0, alpha * 255.0 + 0.5), ti.u32)
+        if bgra != 0:
+            r, b = b, r
         return r | (g << 8) | (b << 16) | (a << 24)
 
     @ti.func
@@ -82,18 +85,19 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
         return ti.Vector([c[0], c[1], c[2], T])
 
     @ti.func
-    def finish(bg, lo, full, exposure, transparent):
+    def finish(bg, lo, full, exposure, mode):
         """bg (RGB, coverage), then the reduced layer over it, then the full-resolution layer:
         c = (bg·T_lo + rgb_lo)·T + rgb. Coverage is 1 for soft bodies; the background itself has 0
-        and is left out of a transparent render (premultiplied, alpha = 1 − (1 − cover)·T_lo·T)."""
+        and is left out of a transparent render (``mode`` bit 0; premultiplied, alpha =
+        1 − (1 − cover)·T_lo·T). ``mode`` bit 1: BGRA byte order."""
         c = ti.Vector([bg[0], bg[1], bg[2]])
         cover = 1.0
-        if transparent != 0:
+        if mode & 1:
             c = c * bg[3]
             cover = bg[3]
         c = c * lo[3] + ti.Vector([lo[0], lo[1], lo[2]])
         c = c * full[3] + ti.Vector([full[0], full[1], full[2]])
-        return pack(c * exposure, 1.0 - (1.0 - cover) * lo[3] * full[3])
+        return pack(c * exposure, 1.0 - (1.0 - cover) * lo[3] * full[3], mode & 2)
 
     @ti.func
     def lo_sample(px, py, z, lo: ti.template(), rows: ti.template(), depth_lo: ti.template(), LO, W,
@@ -332,7 +336,7 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                         bg_packed: ND_U32, out: ND_U32, dirty: ND_I1, touched_lo: ND_I1,
                         TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32, Wl: ti.i32,
                         Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32, shading: ti.f32,
-                        transparent: ti.i32):
+                        mode: ti.i32):
         """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
         the background, tone-mapped and packed. An untouched tile copies the packed background."""
         ti.loop_config(block_dim=1)
@@ -363,7 +367,7 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                         for x in range(px0, px1 + 1):
                             low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
                             out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
-                                                    transparent)
+                                                    mode)
                 else:
                     for y in range(py0, py1 + 1):
                         for x in range(px0, px1 + 1):
@@ -375,14 +379,14 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                             if near != 0:
                                 low = lo_sample(x, y, dep[k], accA, rows, dep, W * H, W, Wl, Hl, s,
                                                 edge)
-                            out[k] = finish(bgc[k], low, full, exposure, transparent)
+                            out[k] = finish(bgc[k], low, full, exposure, mode)
 
     @ti.kernel
     def composite_pixels(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,
                          rows: ND_V4, bgc: ND_V4, dep: ND_F, bg_packed: ND_U32, out: ND_U32, dirty: ND_I1,
                          touched_lo: ND_I1, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
                          Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
-                         shading: ti.f32, transparent: ti.i32):
+                         shading: ti.f32, mode: ti.i32):
         """Full resolution per pixel (the GPU's schedule, after 3DGS): splat in registers, then
         the same composite as ``composite_tiles``."""
         for py, px in ti.ndrange(H, W):
@@ -405,14 +409,14 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                     edge = lo_edge(tx * TILE, ty * TILE, ti.min(W - 1, tx * TILE + TILE - 1),
                                    ti.min(H - 1, ty * TILE + TILE - 1), dep, W * H, Wl, Hl, s)
                     low = lo_sample(px, py, dep[k], accA, rows, dep, W * H, W, Wl, Hl, s, edge)
-                out[k] = finish(bgc[k], low, full, exposure, transparent)
+                out[k] = finish(bgc[k], low, full, exposure, mode)
 
     @ti.kernel
     def pack_background(bgc: ND_V4, bg_packed: ND_U32, n: ti.i32, exposure: ti.f32,
-                        transparent: ti.i32):
+                        mode: ti.i32):
         """The background alone, tone-mapped and packed: what an untouched tile copies."""
         for k in range(n):
-            bg_packed[k] = finish(bgc[k], EMPTY_LAYER, EMPTY_LAYER, exposure, transparent)
+            bg_packed[k] = finish(bgc[k], EMPTY_LAYER, EMPTY_LAYER, exposure, mode)
 
     return dict(splat_tiles=splat_tiles, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
                 composite_tiles=composite_tiles, composite_pixels=composite_pixels,

@@ -103,10 +103,11 @@ class Renderer:
 
     # -- a frame ------------------------------------------------------------------------------
     def render(self, camera, width=None, height=None, *, out=None, exposure=None, show_colliders=None,
-               transparent=False) -> np.ndarray:
+               transparent=False, bgra=False) -> np.ndarray:
         """The scene seen by ``camera`` as an (H, W, 4) uint8 RGBA image (``out`` if given: a
         C-contiguous uint8 array of that shape, written in place; else a new array). Opaque
-        unless ``transparent``: then premultiplied, alpha 0 where only background would show."""
+        unless ``transparent``: then premultiplied, alpha 0 where only background would show.
+        ``bgra``: bytes in B, G, R, A order (what X11, SDL and Taichi's fast GUI blit directly)."""
         W = int(width or self.cfg.width)
         H = int(height or self.cfg.height)
         image = out if out is not None else np.empty((H, W, 4), np.uint8)
@@ -116,7 +117,7 @@ class Renderer:
         cam = (p.tolist(), f.tolist(), r.tolist(), u.tolist(), float(camera.tan_half))
         show = self.cfg.show_colliders if show_colliders is None else bool(show_colliders)
         exposure = float(self.cfg.exposure if exposure is None else exposure)
-        transparent = int(bool(transparent))
+        mode = int(bool(transparent)) | (2 if bgra else 0)
         key = self._background_key(cam, show)
         redrawn = key != t.bg_key
         if redrawn:
@@ -124,9 +125,9 @@ class Renderer:
             t.bg_key = key
             if t.mesh:
                 copy_background(t.fbg, t.fdep, t.bgc, t.depth, H * W)
-        if (key, exposure, transparent) != t.packed_key:
-            self._k["pack_background"](t.bgc, t.bg_packed, H * W, exposure, transparent)
-            t.packed_key = (key, exposure, transparent)
+        if (key, exposure, mode) != t.packed_key:
+            self._k["pack_background"](t.bgc, t.bg_packed, H * W, exposure, mode)
+            t.packed_key = (key, exposure, mode)
         bgc, dep = t.bgc, t.depth
         if self.mesh is not None:
             self.mesh.update()
@@ -135,8 +136,7 @@ class Renderer:
         if t.has_lo and (redrawn or self.mesh is not None):
             downsample_depth(dep, W, H, t.Wl, t.Hl, round(1 / t.scale))
         has_lo = self._splat(t, cam, dep) if self.has_particles else 0
-        common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading,
-                  transparent)
+        common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:
             self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale)
         if self.schedule == "tiles":
