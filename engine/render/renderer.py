@@ -95,10 +95,7 @@ class Renderer:
         return t
 
     def _background_key(self, cam, show):
-        c = self.colliders
-        placed = b"" if c is None or not c.count else (
-            c.collider_point.to_numpy().tobytes() + c.collider_normal.to_numpy().tobytes()
-            + c.collider_radius.to_numpy().tobytes())
+        placed = b"" if self.colliders is None else self.colliders.placement()
         return (tuple(tuple(float(x) for x in a) for a in cam[:4]), float(cam[4]), bool(show), placed)
 
     # -- a frame ------------------------------------------------------------------------------
