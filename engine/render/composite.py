@@ -210,17 +210,19 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
     @ti.func
     def pixel(xx, yy, inside, cx, cy, inv_r2, rec, col, a, is_add, energy, accA: ti.template(),
               accB: ti.template(), dep: ti.template(), base, W):
-        # plain load + store, not +=: one thread owns the tile, and += would compile to an atomic
+        """One pixel of a sprite: additive light touches only accA's RGB, an alpha sprite accA's T
+        and accB (plain load + store, not +=: one thread owns the tile, and += on an array in a
+        parallel loop compiles to an atomic)."""
         k = base + yy * W + xx
-        w = disc_weight(xx, yy, cx, cy, inv_r2, rec[3], dep[k], energy, rec[14])
-        w = ti.select(inside, w, 0.0)
-        B = ti.Vector([0.0, 0.0, 0.0, 0.0])
-        if ti.static(uses_alpha):
-            B = accB[k]
-        A, B = add_sprite(accA[k], B, w, col, a, is_add, rec[11], uses_add, uses_alpha)
-        accA[k] = A
-        if ti.static(uses_alpha):
-            accB[k] = B
+        w = ti.select(inside, disc_weight(xx, yy, cx, cy, inv_r2, rec[3], dep[k], energy, rec[14]), 0.0)
+        if is_add:
+            if ti.static(uses_add):
+                accA[k] = accA[k] + ti.Vector([col[0], col[1], col[2], 0.0]) * (a * w)
+        else:
+            if ti.static(uses_alpha):
+                A, B = add_sprite(accA[k], accB[k], w, col, a, False, rec[11], False, True)
+                accA[k] = A
+                accB[k] = B
 
     @ti.func
     def splat_tile(t, px0, py0, px1, py1, pairs: ti.template(), tile_count: ti.template(),

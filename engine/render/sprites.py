@@ -23,7 +23,7 @@ upsample; small sprites (sparks and their thin streaks) stay at full resolution.
 
 import taichi as ti
 
-from ..particles.curves import Curves
+import numpy as np
 
 TILE = 16  # pixels per tile side (3DGS uses 16×16 tiles)
 MAX_RADIUS_FRACTION = 0.15  # a sprite's radius is clamped to this fraction of the image height
@@ -39,24 +39,48 @@ def oit_depth_weight(z):
     return ti.max(1e-2, ti.min(3e3, 10.0 / (1e-5 + a * a + b2 * b2 * b2)))
 
 
+LOOK_SAMPLES = 256  # samples of each emitter's ramps over life (error at a kink ≤ slope / 512)
+
+
 class Look:
-    """Per-emitter look, shape (E,): colour/alpha/size ramps over life (:class:`Curves`),
-    ``emitter_additive`` (i32), ``emitter_streak`` (f32, s of motion blur), ``emitter_size_rand``."""
+    """Per-emitter look, shape (E,): the colour, alpha and size ramps over normalised life baked
+    into ``look_table`` (E, LOOK_SAMPLES + 1) vec8 f32 = (R, G, B, alpha, size m, 0, 0, 0), read
+    with one linear interpolation per sprite (evaluating up to 8 stops of three ramps per particle
+    per frame cost more than the projection); ``emitter_additive`` (i32), ``emitter_streak`` (f32,
+    s of motion blur), ``emitter_size_rand``."""
 
     def __init__(self, emitter_configs):
         E = len(emitter_configs)
-        self.color = Curves([e.color for e in emitter_configs], 3)
-        self.alpha = Curves([e.alpha for e in emitter_configs], 1)
-        self.size = Curves([e.size for e in emitter_configs], 1)
+        t = np.linspace(0.0, 1.0, LOOK_SAMPLES + 1)
+        table = np.zeros((E, LOOK_SAMPLES + 1, 8), np.float32)
+        for e, c in enumerate(emitter_configs):
+            for col, (ramp, comp) in enumerate([(c.color, 1), (c.color, 2), (c.color, 3), (c.alpha, 1),
+                                                (c.size, 1)]):
+                stops = np.asarray(ramp, np.float64)
+                table[e, :, col] = np.interp(t, stops[:, 0], stops[:, comp])  # flat outside
+        self.look_table = ti.Vector.field(8, ti.f32, shape=(E, LOOK_SAMPLES + 1))
+        self.look_table.from_numpy(table)
         self.emitter_additive = ti.field(ti.i32, shape=E)
         self.emitter_streak = ti.field(ti.f32, shape=E)
         self.emitter_size_rand = ti.field(ti.f32, shape=E)
-        for e, c in enumerate(emitter_configs):
-            self.emitter_additive[e] = int(c.blend == "additive")
-            self.emitter_streak[e] = c.streak
-            self.emitter_size_rand[e] = c.size_randomness
+        self.emitter_additive.from_numpy(np.array([int(c.blend == "additive") for c in emitter_configs], np.int32))
+        self.emitter_streak.from_numpy(np.array([c.streak for c in emitter_configs], np.float32))
+        self.emitter_size_rand.from_numpy(np.array([c.size_randomness for c in emitter_configs], np.float32))
         self.uses_alpha = any(c.blend == "alpha" for c in emitter_configs)
         self.uses_additive = any(c.blend == "additive" for c in emitter_configs)
+
+    def make_func(self):
+        """``look_at(e, t)`` → vec8 (R, G, B, alpha, size) of emitter e at normalised life t."""
+        table = self.look_table
+
+        @ti.func
+        def look_at(e, t):
+            x = ti.min(ti.max(t, 0.0), 1.0) * LOOK_SAMPLES
+            k = ti.min(ti.cast(x, ti.i32), LOOK_SAMPLES - 1)
+            f = x - k
+            return table[e, k] + f * (table[e, k + 1] - table[e, k])
+
+        return look_at
 
 
 class SpriteRecords:
@@ -82,7 +106,7 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
     pos, vel, age, life, alive, pem, prand = (
         S.particle_pos, S.particle_vel, S.particle_age, S.particle_life, S.particle_alive,
         S.particle_emitter, S.particle_rand)
-    color_at, alpha_at, size_at = look.color.make_func(), look.alpha.make_func(), look.size.make_func()
+    look_at = look.make_func()
     additive, streak, size_rand = look.emitter_additive, look.emitter_streak, look.emitter_size_rand
     uses_alpha = look.uses_alpha
     geom, slook, tail, info, tiles, soft = (rec.spr_geom, rec.spr_look, rec.spr_tail, rec.spr_info,
@@ -99,7 +123,8 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
                 dpos = pos[i] - o
                 z = dpos.dot(f)
                 if z > 0.05:
-                    sz = size_at(e, tl)[0] * (1.0 + size_rand[e] * (2.0 * prand[i] - 1.0))
+                    lk = look_at(e, tl)
+                    sz = lk[4] * (1.0 + size_rand[e] * (2.0 * prand[i] - 1.0))
                     scale = 0.5 * H / (z * th)  # pixels per metre at depth z
                     rad = 0.5 * sz * scale
                     is_streak = streak[e] > 0
@@ -143,8 +168,8 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
                     y0 = ti.max(0, ti.cast(ti.floor(loy), ti.i32))
                     y1 = ti.min(Hl - 1, ti.cast(ti.floor(hiy), ti.i32))
                     if x0 <= x1 and y0 <= y1:
-                        col = color_at(e, tl)
-                        a = alpha_at(e, tl)[0]
+                        col = ti.Vector([lk[0], lk[1], lk[2]])
+                        a = lk[3]
                         wz = 0.0
                         if ti.static(uses_alpha):
                             wz = oit_depth_weight(z)
