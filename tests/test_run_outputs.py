@@ -6,8 +6,8 @@ import os
 import re
 
 import pytest
-from PIL import Image
 
+from engine.render import output
 from runhelp import assert_whole_frames, call, particles, same_bytes
 
 TINY = """seed = 2
@@ -83,21 +83,19 @@ def test_unwritable_output_exits_4_with_one_line(tmp_path, target):
 def test_disk_full_mid_run_exits_4_and_leaves_no_partial_frame(tmp_path, monkeypatch):
     cfg = write_cfg(tmp_path)
     out = tmp_path / "out"
-    real_save = Image.Image.save
+    real_write = output._write_bytes
     calls = []
-
     failed = []
 
-    def save(self, fp, *a, **kw):
-        calls.append(fp)
+    def write(path, data):
+        calls.append(path)
         if len(calls) == 4:  # the fourth write: half a file, then the disk is full
-            failed.append(int(re.search(r"frame_(\d+)", os.path.basename(fp)).group(1)))
-            with open(fp, "wb") as fh:
-                fh.write(b"\x89PNG\r\n\x1a\n partial")
+            failed.append(int(re.search(r"frame_(\d+)", os.path.basename(path)).group(1)))
+            real_write(path, data[: len(data) // 2])
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        return real_save(self, fp, *a, **kw)
+        return real_write(path, data)
 
-    monkeypatch.setattr(Image.Image, "save", save)
+    monkeypatch.setattr(output, "_write_bytes", write)
     code, stdout, err = call("run", cfg, "--out", out, "--quiet", "--workers", 2)
     lines = err.strip().splitlines()
     assert code == 4, err

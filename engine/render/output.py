@@ -12,7 +12,9 @@ import contextlib
 import glob
 import os
 import queue
+import struct
 import threading
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -77,6 +79,39 @@ def as_rgb(img) -> np.ndarray:
     return np.ascontiguousarray(a[..., :3]) if a.shape[2] == 4 else a
 
 
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def encode_png(img: np.ndarray, level: int = 1) -> bytes:
+    """PNG bytes of an (H, W, 3) uint8 image: 8-bit RGB, every row with the Sub filter (each byte
+    minus the one a pixel to its left; PNG spec §9.2), one zlib stream at ``level``.
+
+    Written here rather than through PIL because the whole compression is one ``zlib.compress``
+    call, which releases the GIL (PIL feeds zlib in 64 KB pieces, taking the GIL for each, and
+    starved behind Taichi's kernels: one PIL encoder thread held ``particles run`` to 50% of the
+    sim + render rate at 1280×720). Measured on a campfire frame at 1280×720: 18 ms and 333 KB
+    at level 1, against PIL's 58 ms and 311 KB at its level 3. The same image and zlib give the
+    same bytes."""
+    H, W, C = img.shape
+    flat = img.reshape(H, W * C)
+    rows = np.empty((H, 1 + W * C), np.uint8)
+    rows[:, 0] = 1  # filter type 1, Sub
+    rows[:, 1:1 + C] = flat[:, :C]
+    np.subtract(flat[:, C:], flat[:, :-C], out=rows[:, 1 + C:])  # uint8: wraps modulo 256
+    header = struct.pack(">IIBBBBB", W, H, 8, 2, 0, 0, 0)  # 8-bit RGB, deflate, no interlace
+    return (_PNG_SIGNATURE + _chunk(b"IHDR", header)
+            + _chunk(b"IDAT", zlib.compress(rows.tobytes(), level)) + _chunk(b"IEND", b""))
+
+
+def _write_bytes(path: str, data: bytes) -> None:
+    with open(path, "wb") as fh:
+        fh.write(data)
+
+
 @contextlib.contextmanager
 def replacing(path: str):
     """Yield a hidden temporary name beside ``path``; when the block ends without error it is
@@ -99,7 +134,7 @@ class FrameWriter:
     fresh array, not a buffer the renderer will reuse."""
 
     def __init__(self, out_dir: str, fmt: str = "png", fps: float = 30.0, name: str = "render",
-                 compress_level: int = 3, workers: int | None = None):
+                 compress_level: int = 1, workers: int | None = None):
         if fmt not in FORMATS:
             raise OutputError(f"--format: unknown value {fmt!r}; allowed: {', '.join(FORMATS)}")
         self.out_dir, self.fmt, self.fps, self.name = out_dir, fmt, fps, name
@@ -132,13 +167,12 @@ class FrameWriter:
         return (int(workers or default_workers()) + 3) if fmt == "png" else 6
 
     def _write_png(self, index, img):
-        from PIL import Image
-
         try:
             if self._error is not None:
                 return  # a frame failed: the run is ending, write nothing after it
+            data = encode_png(img, self.compress_level)
             with replacing(frame_path(self.out_dir, index)) as tmp:
-                Image.fromarray(img).save(tmp, format="PNG", compress_level=self.compress_level)
+                _write_bytes(tmp, data)
             self._done[index] = frame_path(self.out_dir, index)
         except BaseException as e:  # reported to the main thread
             if self._failed_at is None or index < self._failed_at:

@@ -137,12 +137,44 @@ def check_budget(cfg, args, workers: int) -> budget.Estimate:
     return est
 
 
+def render_frames(scene, writer, first: int, total: int, stop=None, bar=None):
+    """The frame loop of ``particles run``: simulate frames 0..total-1, render and submit those
+    from ``first`` on, stop early when ``stop.requested`` (a signal; ``runtime.Interrupted``
+    ends a frame mid-way), then flush the writer. Returns (simulation failure, output failure),
+    each an exception or None; the writer is closed either way."""
+    from .. import runtime
+    from ..render.output import OutputError
+    from ..scene import DivergenceError
+
+    failure = out_failure = None
+    try:
+        for k in range(total):
+            if stop is not None and stop.requested:
+                break
+            scene.advance_frame()  # raises runtime.Interrupted mid-frame on a signal
+            if k >= first:  # --resume: frames before `first` are on disk already
+                writer.submit(k, scene.render())
+            if bar is not None:
+                bar.advance(note=f"live {scene.stats.alive:,}")
+    except runtime.Interrupted:
+        pass  # stop.requested says so
+    except DivergenceError as e:
+        failure = e
+    except OutputError as e:
+        out_failure = e
+    stopped = stop is not None and stop.requested
+    try:
+        writer.close(finished=failure is None and out_failure is None and not stopped)
+    except OutputError as e:
+        out_failure = out_failure or e
+    return failure, out_failure
+
+
 def cmd_run(args) -> int:
     """``particles run``: checks (flags, config, MP4 sizes, output folder, budgets) before any
     work, then simulates every frame and renders from the first one not on disk."""
-    from .. import runtime
-    from ..render.output import FrameWriter, OutputError, default_workers
-    from ..scene import DivergenceError, Scene
+    from ..render.output import FrameWriter, default_workers
+    from ..scene import Scene
     from .progress import progress
     from .signals import stopping
 
@@ -164,27 +196,9 @@ def cmd_run(args) -> int:
     scene = Scene(cfg)
     t_built = time.perf_counter()
     writer = FrameWriter(out_dir, args.format, cfg.fps, cfg.name, workers=workers)
-    failure = out_failure = None
     with stopping(raise_now=False) as stop:
         with progress(total, unit="frames", label=cfg.name, quiet=getattr(args, "quiet", False)) as bar:
-            try:
-                for k in range(total):
-                    if stop.requested:
-                        break
-                    scene.advance_frame()  # raises runtime.Interrupted mid-frame on a signal
-                    if k >= first:  # --resume: frames before `first` are on disk already
-                        writer.submit(k, scene.render())
-                    bar.advance(note=f"live {scene.stats.alive:,}")
-            except runtime.Interrupted:
-                pass  # stop.requested says so
-            except DivergenceError as e:
-                failure = e
-            except OutputError as e:
-                out_failure = e
-        try:
-            writer.close(finished=failure is None and out_failure is None and not stop.requested)
-        except OutputError as e:
-            out_failure = out_failure or e
+            failure, out_failure = render_frames(scene, writer, first, total, stop, bar)
     wall = time.perf_counter() - t_start
     st = scene.stats
     done = first + len(writer.written) if args.format == "png" else 0
