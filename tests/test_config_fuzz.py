@@ -134,9 +134,7 @@ def _write(d, data: bytes) -> str:
     return path
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(muts=malformed, command=st.sampled_from(["run", "validate"]))
-def test_malformed_configs_through_the_real_command(muts, command):
+def real_command_check(muts, command):
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "bad.toml")
         with open(path, "w", encoding="utf-8") as fh:
@@ -180,3 +178,17 @@ def test_bad_flag_values_give_one_line_naming_the_flag(scratch, monkeypatch):
 
     check()
     assert len(set(seen)) >= 15  # the draws reached most flags
+
+
+# A real process per example (about a second each): a few in the default run, more in the slow one.
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(muts=malformed, command=st.sampled_from(["run", "validate"]))
+def test_malformed_configs_through_the_real_command(muts, command):
+    real_command_check(muts, command)
+
+
+@pytest.mark.slow
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(muts=malformed, command=st.sampled_from(["run", "validate"]))
+def test_malformed_configs_through_the_real_command_many(muts, command):
+    real_command_check(muts, command)
