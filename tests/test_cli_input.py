@@ -235,3 +235,14 @@ def test_second_signal_ends_the_process_at_once(tmp_path):
     r = subprocess.run([cmd[0], str(script)], capture_output=True, text=True, timeout=60,
                        **{k: v for k, v in kw.items()})
     assert r.returncode == -signal.SIGTERM and r.stdout == "first seen\n", (r.stdout, r.stderr)
+
+
+def test_parser_choices_match_the_engine():
+    from engine import runtime
+    from engine.tools import cli
+    from engine.tools.problems import PROBLEMS
+
+    assert cli.ARCH_CHOICES == runtime.ARCHES  # kept apart: `validate` imports no Taichi
+    assert set(cli.PROBLEM_NAMES) == set(PROBLEMS)
+    code, _, err = call("--arch", "vulkan", "ode", "decay")  # this process runs on the CPU already
+    assert "--arch: " in one_error_line(code, err)

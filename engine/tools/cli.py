@@ -229,6 +229,8 @@ def _init_taichi(args) -> None:
     except runtime.ArchUnavailable as e:
         raise UserError(f"--arch: {e}; use --arch cpu, or --arch auto to take a GPU where one "
                         f"starts and the CPU otherwise") from None
+    except RuntimeError as e:  # called in a process whose Taichi already runs on another arch
+        raise UserError(f"--arch: {e}") from None
 
 
 def _print_error(e) -> None:
