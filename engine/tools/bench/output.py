@@ -1,18 +1,19 @@
-"""Offline throughput: does writing frames slow a render down? The same config, simulated and
-rendered at 1280×720, measured three ways side by side (each on a freshly built scene, timing the
-frame loop only, not the build; the three take turns, twice, and each keeps its best round, so
-a burst of load on this shared machine does not land on one of them only):
+"""Offline throughput: does writing frames slow a render down? One scene (a shipped config at
+1280×720), after a warm-up, runs blocks of frames three ways in turn:
 
 * sim + render: ``advance_frame()`` + ``render()``, images dropped: the rate to match;
 * ``particles run``: the command's own frame loop (commands.render_frames) writing PNGs through
-  the encoder threads (one per core, at least two);
+  its encoder threads (one per core, at least two), the writer drained at the block's end;
 * the same with one encoder thread (how ``particles run`` wrote before).
 
-Target (issue 12): ``particles run`` at least 80% of sim + render.
+Blocks alternate (A B C A B C ...) and each way reports its median block, so the load of a shared
+machine drifting during the run lands on all three alike. Target (issue 12): ``particles run`` at
+least 80% of sim + render.
 """
 from __future__ import annotations
 
 import os
+import statistics
 import tempfile
 import time
 
@@ -22,57 +23,40 @@ from .common import Row
 CONFIG = os.path.join(CONFIGS, "campfire.toml")
 
 
-def _scene(size, frames):
+def run(quick: bool = False):
     from ...config import load_config
+    from ...render.output import FrameWriter, default_workers, prepare_dir
     from ...scene import Scene
+    from ..commands import render_frames
 
+    size = (320, 180) if quick else (1280, 720)
+    block, rounds, warm = (2, 1, 2) if quick else (8, 4, 30)
+    workers = default_workers()
     cfg = load_config(CONFIG, {"render.width": size[0], "render.height": size[1]})
-    return Scene(cfg), cfg
-
-
-def _sim_render(size, frames, warm) -> float:
-    scene, _ = _scene(size, frames)
+    scene = Scene(cfg)
     for _ in range(warm):
         scene.advance_frame()
         scene.render()
-    t0 = time.perf_counter()
-    for _ in range(frames):
-        scene.advance_frame()
-        scene.render()
-    return frames / (time.perf_counter() - t0)
-
-
-def _run(size, frames, warm, workers, out) -> float:
-    from ...render.output import FrameWriter, prepare_dir
-    from ..commands import render_frames
-
-    scene, cfg = _scene(size, frames)
-    for _ in range(warm):  # the same warm-up, not written
-        scene.advance_frame()
-        scene.render()
-    prepare_dir(out, overwrite=False)
-    writer = FrameWriter(out, "png", cfg.fps, cfg.name, workers=workers)
-    t0 = time.perf_counter()
-    failure, out_failure = render_frames(scene, writer, 0, frames)
-    if failure or out_failure:
-        raise RuntimeError(f"render failed: {failure or out_failure}")
-    return frames / (time.perf_counter() - t0)
-
-
-def run(quick: bool = False):
-    from ...render.output import default_workers
-
-    size = (320, 180) if quick else (1280, 720)
-    frames, warm, rounds = (6, 2, 1) if quick else (45, 30, 2)
-    workers = default_workers()
-    sec = (f"output: {os.path.basename(CONFIG)} at {size[0]}x{size[1]}, {frames} frames after "
-           f"{warm} warm-up frames, PNG, best of {rounds}")
-    base = many = one = 0.0
+    rates = {"plain": [], "many": [], "one": []}
     with tempfile.TemporaryDirectory(prefix="particles-bench-out-") as tmp:
         for r in range(rounds):
-            base = max(base, _sim_render(size, frames, warm))
-            many = max(many, _run(size, frames, warm, workers, os.path.join(tmp, f"many{r}")))
-            one = max(one, _run(size, frames, warm, 1, os.path.join(tmp, f"one{r}")))
+            t0 = time.perf_counter()
+            for _ in range(block):
+                scene.advance_frame()
+                scene.render()
+            rates["plain"].append(block / (time.perf_counter() - t0))
+            for key, n in (("many", workers), ("one", 1)):
+                out = os.path.join(tmp, f"{key}{r}")
+                prepare_dir(out, overwrite=False)
+                writer = FrameWriter(out, "png", cfg.fps, cfg.name, workers=n)
+                t0 = time.perf_counter()
+                failure, out_failure = render_frames(scene, writer, 0, block)
+                if failure or out_failure:
+                    raise RuntimeError(f"render failed: {failure or out_failure}")
+                rates[key].append(block / (time.perf_counter() - t0))
+    base, many, one = (statistics.median(rates[k]) for k in ("plain", "many", "one"))
+    sec = (f"output: {os.path.basename(CONFIG)} at {size[0]}x{size[1]} after {warm} frames, "
+           f"{rounds} rounds of {block}-frame blocks, median block")
     return [
         Row(sec, "sim + render (no output)", base, "frames/s"),
         Row(sec, f"particles run, {workers} encoders", many, "frames/s",
