@@ -39,7 +39,7 @@ def one_error_line(code, err, expect_code=2):
     (["--size", "641x361", "--format", "mp4"], "--size: 641x361 is not allowed with --format mp4"),
     (["--size", "0x0"], "--size: '0x0'"),  # names the flag, not render.width
     (["--size", "abc"], "--size: 'abc' is not WxH"),
-    (["--out", ""], "--out: '' is empty"),
+    (["--out", ""], "--out: '' is empty: give a path"),
     (["--frames", "0"], "--frames: '0'"),
     (["--frames", "x"], "--frames: 'x' is not a whole number"),
     (["--seed", "-1"], "--seed: '-1'"),

@@ -121,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.set_defaults(func=lambda a: _commands().cmd_validate(a), no_taichi=True)
 
     ls = sub.add_parser("list", help="list the configs and effect presets")
-    ls.add_argument("--dir", default="configs", type=T(flags.folder))
+    ls.add_argument("--dir", default="configs", type=T(flags.path))
     ls.set_defaults(func=lambda a: _commands().cmd_list(a), no_taichi=True)
 
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
@@ -132,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=_cmd_bench)
 
     c = sub.add_parser("chart", help="work-precision, stability and energy-drift charts (PNG + CSV)")
-    c.add_argument("--out", default=os.path.join("renders", "charts"), type=T(flags.folder))
+    c.add_argument("--out", default=os.path.join("renders", "charts"), type=T(flags.path))
     c.add_argument("--quick", action="store_true", help="coarse sweeps (under a minute)")
     c.add_argument("--only", default=None,
                    help="workprec, stability, energy, scenes, or one problem (kepler, lotka-volterra, ...)")
@@ -143,13 +143,13 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("config")
     w.add_argument("--frames", type=T(flags.integer(1, 1_000_000)), default=None,
                    help="close after this many frames")
-    w.add_argument("--screenshot", default=None, type=T(flags.folder),
+    w.add_argument("--screenshot", default=None, type=T(flags.path),
                    help="save the last frame shown to this PNG")
     w.set_defaults(func=lambda a: __import__("engine.tools.viewer", fromlist=["x"]).cmd_view(a))
 
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
-    g.add_argument("--out", default=os.path.join("renders", "gallery"), type=T(flags.folder))
-    g.add_argument("--configs", default="configs", type=T(flags.folder))
+    g.add_argument("--out", default=os.path.join("renders", "gallery"), type=T(flags.path))
+    g.add_argument("--configs", default="configs", type=T(flags.path))
     g.add_argument("--quiet", action="store_true", help="no progress display")
     g.set_defaults(func=lambda a: __import__("engine.tools.gallery", fromlist=["x"]).cmd_gallery(a))
     return ap

@@ -66,11 +66,11 @@ def size(text):
     return w, h
 
 
-def folder(text) -> str:
-    """A path to write into: not empty, no NUL, not only blanks."""
+def path(text) -> str:
+    """A file or folder path: not empty, not only blanks, no NUL."""
     s = str(text)
     if not s.strip():
-        raise FlagError(f"{_show(text)} is empty: give a folder")
+        raise FlagError(f"{_show(text)} is empty: give a path")
     if "\x00" in s:
         raise FlagError(f"{_show(text)} holds a NUL character")
     return s
@@ -144,7 +144,7 @@ def check(args, spec) -> None:
 # cmd_run re-checks a Namespace built in Python (particles wedge) with them.
 RUN_FLAGS = {
     "frames": ("--frames", integer(1, 1_000_000)),
-    "out": ("--out", folder),
+    "out": ("--out", path),
     "format": ("--format", choice("png", "gif", "mp4")),
     "size": ("--size", size),
     "seed": ("--seed", integer(0, 2**32 - 1)),
