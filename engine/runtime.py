@@ -15,10 +15,17 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep stdout for 
 
 import taichi as ti  # noqa: E402
 
-ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu")
+ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
+# "gpu" takes the first of these that starts; "auto" the same, else the CPU. (Taichi's own ti.gpu
+# list also probes OpenGL, which crashed the process on a headless machine without a GPU.)
+_GPU_ORDER = ("cuda", "vulkan", "metal")
 
-_state = {"arch": None, "kwargs": None}
+_state = {"arch": None, "requested": None, "kwargs": None}
 _reset_hooks = []  # caches holding fields or kernels of the current Taichi program
+
+
+class ArchUnavailable(RuntimeError):
+    """The requested backend cannot start on this machine (no device, no driver)."""
 
 
 def _host_initialised() -> bool:
@@ -30,36 +37,61 @@ def _host_initialised() -> bool:
         return False
 
 
-def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
-         kernel_profiler: bool = False) -> str:
-    """Initialise Taichi once for this process and return the arch in use.
+def _arch_in_use() -> str:
+    """The backend Taichi really started: "cpu" for x64/arm64, else Taichi's arch name."""
+    from taichi.lang import impl
 
-    ``arch`` is one of :data:`ARCHES`. Later calls are no-ops (a different arch after the first
-    call raises, since fields already allocated cannot move). ``threads`` caps CPU threads.
-    The offline cache stays on so a second run of the same scene starts fast; it lives where
-    ``PARTICLES_TI_CACHE`` points (a folder) if set, else in Taichi's default place.
+    arch = impl.current_cfg().arch
+    return "cpu" if arch in (ti.x64, ti.arm64) else arch.name
+
+
+def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
+         log_level: str = "warn", kernel_profiler: bool = False) -> str:
+    """Initialise Taichi once for this process and return the arch really in use ("cpu",
+    "cuda", "vulkan", "metal").
+
+    ``arch`` is one of :data:`ARCHES`. A named backend that cannot start raises
+    :class:`ArchUnavailable` (Taichi would otherwise fall back to the CPU silently); only "auto"
+    falls back, and the return value says what ran. Later calls are no-ops (a different arch
+    after the first call raises, since fields already allocated cannot move). ``threads`` caps
+    CPU threads. ``log_level`` ("warn", "error") is Taichi's; the command line keeps Taichi's
+    warnings (offline-cache lock contention between processes) off its one-line errors with
+    "error". The offline cache stays on so a second run of the same scene starts fast; it
+    lives where ``PARTICLES_TI_CACHE`` points (a folder) if set, else in Taichi's default place.
     ``kernel_profiler`` turns on Taichi's per-kernel timer (``particles profile`` uses it).
     """
     if arch not in ARCHES:
         raise ValueError(f"arch: unknown value {arch!r}; allowed: {', '.join(ARCHES)}")
     if _state["arch"] is not None:
-        if arch != _state["arch"] and _state["arch"] != "host":
+        if arch not in ("auto", _state["requested"], _state["arch"]) and _state["arch"] != "host":
             raise RuntimeError(f"Taichi already initialised with arch={_state['arch']}, not {arch}")
         return _state["arch"]
     if _host_initialised():
-        _state["arch"] = "host"
+        _state["arch"] = _state["requested"] = "host"
         return "host"
-    kwargs = dict(arch=getattr(ti, arch), default_fp=ti.f32, offline_cache=True,
-                  log_level=ti.WARN, debug=debug, random_seed=0,
-                  kernel_profiler=kernel_profiler)
+    level = {"warn": ti.WARN, "error": ti.ERROR}[log_level]
+    kwargs = dict(default_fp=ti.f32, offline_cache=True, log_level=level, debug=debug,
+                  random_seed=0, kernel_profiler=kernel_profiler)
     if os.environ.get("PARTICLES_TI_CACHE"):
         kwargs["offline_cache_file_path"] = os.environ["PARTICLES_TI_CACHE"]
-    if threads and arch == "cpu":
+    if threads and arch in ("cpu", "auto"):
         kwargs["cpu_max_num_threads"] = int(threads)
     with contextlib.redirect_stdout(io.StringIO()):  # "[Taichi] Starting on arch=..." banner
-        ti.init(**kwargs)
-    _state["arch"] = arch
-    return arch
+        if arch == "cpu":
+            ti.init(arch=ti.cpu, **kwargs)
+        else:
+            wanted = [getattr(ti, a) for a in (_GPU_ORDER if arch in ("gpu", "auto") else (arch,))]
+            try:  # ERROR level: probing a missing driver warns "libcuda.so lib not found"
+                ti.init(arch=wanted, enable_fallback=False, **dict(kwargs, log_level=ti.ERROR))
+                ti.set_logging_level(level)
+            except RuntimeError:
+                if arch != "auto":
+                    raise ArchUnavailable(
+                        f"{arch} cannot start on this machine (no {arch if arch != 'gpu' else 'GPU'} "
+                        f"device or driver found)") from None
+                ti.init(arch=ti.cpu, **kwargs)
+    _state["arch"], _state["requested"] = _arch_in_use(), arch
+    return _state["arch"]
 
 
 def on_reset(hook) -> None:
@@ -77,7 +109,7 @@ def reset() -> None:
         hook()
     if _state["arch"] not in (None, "host"):
         ti.reset()
-    _state["arch"] = None
+    _state["arch"] = _state["requested"] = None
 
 
 class Interrupted(Exception):
@@ -87,10 +119,12 @@ class Interrupted(Exception):
 _stop_check = [None]
 
 
-def set_stop_check(fn) -> None:
+def set_stop_check(fn):
     """``fn()`` -> bool, polled between steps (``None``: never stop). The command line installs
-    its signal flag here so SIGINT/SIGTERM stop a long frame mid-way, not only between frames."""
-    _stop_check[0] = fn
+    its signal flag here so SIGINT/SIGTERM stop a long frame mid-way, not only between frames.
+    Returns the check it replaces (to put back afterwards)."""
+    old, _stop_check[0] = _stop_check[0], fn
+    return old
 
 
 def check_stop() -> None:

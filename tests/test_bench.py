@@ -2,6 +2,8 @@
 No timing assertions (the machines are noisy)."""
 import math
 
+import pytest
+
 from engine.tools import bench
 from engine.tools.bench import cloth
 
@@ -14,21 +16,39 @@ EXPECTED = {
     "ode": ["engine RK4 step doubling (f32)", "scipy solve_ivp RK45 (f64)"],
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
     "features": ["all features", "none of them"],
+    "output": ["sim + render (no output)", "particles run, 1 encoder"],
 }
+# start-up runs `particles run` in subprocesses (a cold compile each) and output builds three
+# scenes: together half the quick bench's time, so they run with the slow tests
+SLOW = ("startup", "output")
 
 
-def test_quick_bench_has_every_row_with_finite_positive_figures():
-    rows = bench.run(quick=True)
+def check_rows(rows, sections):
     names = [r.name.strip() for r in rows]
-    for section, expected in EXPECTED.items():
-        for name in expected:
+    for section in sections:
+        for name in EXPECTED[section]:
             assert name in names, (section, name, names)
-    if cloth.available():
-        assert any("cloth" in r.section for r in rows)
     for r in rows:
         assert math.isfinite(r.value) and r.value > 0, r
     table = bench.format_table(rows)
     assert all(n in table for n in names)
+    return names
+
+
+def test_quick_bench_has_every_row_with_finite_positive_figures():
+    fast = [s for s in bench.SECTIONS if s not in SLOW]
+    rows = bench.run(quick=True, only=fast)
+    check_rows(rows, [s for s in fast if s in EXPECTED])
+    if cloth.available():
+        assert any("cloth" in r.section for r in rows)
     feats = {r.name: r.extra["kernels"] for r in rows if r.section.startswith("features")}
     # a scene without optional features compiles no more kernels than the full one
     assert len(feats["none of them"]) <= len(feats["all features"])
+
+
+@pytest.mark.slow
+def test_quick_bench_startup_and_output_sections():
+    rows = bench.run(quick=True, only=list(SLOW))
+    check_rows(rows, SLOW)
+    ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra]
+    assert len(ratios) == 2 and all(0 < q < 10 for q in ratios)

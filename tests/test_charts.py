@@ -16,8 +16,21 @@ from engine.tools.problems import DAMPED_SPRING  # noqa: E402
 
 @pytest.fixture(scope="module")
 def quick_charts(tmp_path_factory):
+    # the charts these tests read; the real-scene charts (minutes of sparks and cloth at small h)
+    # are checked by the slow test below
     out = tmp_path_factory.mktemp("charts")
-    return out, run_charts(out, quick=True)
+    return out, run_charts(out, quick=True, which=["workprec", "stability", "energy"])
+
+
+@pytest.mark.slow
+def test_scene_charts_are_written(tmp_path):
+    paths = run_charts(tmp_path, quick=True, which="scenes")
+    names = sorted(p.split("/")[-1] for p in paths)
+    assert names == ["workprec_scene_cloth.csv", "workprec_scene_cloth.png",
+                     "workprec_scene_sparks.csv", "workprec_scene_sparks.png"]
+    rows = _rows(tmp_path / "workprec_scene_sparks.csv")
+    assert rows and all(r["nfev"] > 0 for r in rows)
+    assert not [f for f in tmp_path.iterdir() if f.name.startswith(".")]  # no temporaries left
 
 
 def _rows(path):
@@ -101,6 +114,11 @@ def test_stability_and_energy_csv(quick_charts):
 def test_unknown_chart_name_is_rejected(tmp_path):
     with pytest.raises(ValueError, match="allowed"):
         run_charts(tmp_path, quick=True, which="nope")
+    from runhelp import call
+
+    code, out, err = call("chart", "--out", tmp_path / "c", "--only", "nope")
+    assert code == 2 and not out and err.startswith("error: --only: unknown chart 'nope'")
+    assert len(err.splitlines()) == 1 and not (tmp_path / "c").exists()
 
 
 def test_damped_spring_closed_form():

@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from configgen import BASE, apply, malformed, to_toml
+from flaggen import bad_call
 from runhelp import ENV, call
 
 FUZZ_EXAMPLES = 1000
@@ -133,9 +134,7 @@ def _write(d, data: bytes) -> str:
     return path
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(muts=malformed, command=st.sampled_from(["run", "validate"]))
-def test_malformed_configs_through_the_real_command(muts, command):
+def real_command_check(muts, command):
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "bad.toml")
         with open(path, "w", encoding="utf-8") as fh:
@@ -149,3 +148,47 @@ def test_malformed_configs_through_the_real_command(muts, command):
         check_lines(text.splitlines(), f"{path}: " if command == "validate" else f"error: {path}: ",
                     muts, r.stdout + r.stderr)
         assert sorted(os.listdir(d)) == ["bad.toml"]  # nothing written, not even renders/
+
+
+FLAG_EXAMPLES = 400
+
+
+def test_bad_flag_values_give_one_line_naming_the_flag(scratch, monkeypatch):
+    """Every checked flag of every command, one bad value at a time: exit 2, one line on stderr
+    naming the flag, nothing on stdout, nothing written (the rest of each call is valid)."""
+    work = os.path.join(scratch, "flags")
+    os.makedirs(work)
+    config = os.path.join(scratch, "base.toml")
+    with open(config, "w") as fh:
+        fh.write(to_toml(BASE))
+    monkeypatch.chdir(work)  # renders/, charts or stills would land here
+    seen = []
+
+    @settings(max_examples=FLAG_EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+    @given(case=bad_call())
+    def check(case):
+        argv, flag = case
+        argv = [a.replace("{config}", config).replace("{out}", os.path.join(work, "out")) for a in argv]
+        seen.append(flag)
+        code, out, err = call(*argv)
+        lines = err.splitlines()
+        assert code == 2 and not out, (argv, out, err)
+        assert len(lines) == 1 and lines[0].startswith(f"error: {flag}: "), (argv, err)
+        assert os.listdir(work) == [], (argv, os.listdir(work))
+
+    check()
+    assert len(set(seen)) >= 15  # the draws reached most flags
+
+
+# A real process per example (about a second each): a few in the default run, more in the slow one.
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(muts=malformed, command=st.sampled_from(["run", "validate"]))
+def test_malformed_configs_through_the_real_command(muts, command):
+    real_command_check(muts, command)
+
+
+@pytest.mark.slow
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(muts=malformed, command=st.sampled_from(["run", "validate"]))
+def test_malformed_configs_through_the_real_command_many(muts, command):
+    real_command_check(muts, command)

@@ -118,3 +118,75 @@ def test_resume_refuses_other_settings(setup, tmp_path):
     assert r.returncode == 2 and "other settings (config.seed)" in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
     assert assert_whole_frames(out) == 2
+
+
+def run_on_terminal(argv, until: bytes, timeout=120):
+    """Start ``particles argv`` with stderr on a pseudo-terminal; read it until ``until`` shows
+    (the progress display is drawn: the frame loop has started). Returns (process, master fd,
+    bytes read so far)."""
+    import pty
+    import select
+
+    master, slave = pty.openpty()
+    cmd, kw = command(*argv)
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=slave, **kw)
+    os.close(slave)
+    seen, t0 = b"", time.monotonic()
+    while until not in seen:
+        assert time.monotonic() - t0 < timeout and proc.poll() is None, (proc.poll(), seen[-500:])
+        if select.select([master], [], [], 0.2)[0]:
+            seen += os.read(master, 65536)
+    return proc, master, seen
+
+
+def read_rest(proc, master, timeout=60):
+    import select
+
+    seen = b""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        r = select.select([master], [], [], 0.1)[0]
+        if r:
+            try:
+                chunk = os.read(master, 65536)
+            except OSError:  # the child closed the terminal
+                break
+            if not chunk:
+                break
+            seen += chunk
+        elif proc.poll() is not None:
+            break
+    os.close(master)
+    return seen
+
+
+def test_progress_on_a_terminal_and_sigterm_mid_frame(tmp_path):
+    """On a terminal `particles run` shows frames done, the rate and the time left; SIGTERM in the
+    middle of a frame of ~100,000 steps stops it there (the step loop polls the flag), not at the
+    frame's end, and exits 143 with one line and only whole frames."""
+    cfg = tmp_path / "slow.toml"
+    cfg.write_text(CONFIG.replace("h = 0.002", "h = 3e-7").replace("frames = 60", "frames = 3"))
+    out = tmp_path / "out"
+    proc, master, seen = run_on_terminal(["run", cfg, "--out", out, "--max-steps", "10000000"],
+                                         until=b"frames/s")
+    assert b"0/3" in seen and b"effect" not in seen or b"slow" in seen  # label, frames done of total
+    t_signal = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    rest = read_rest(proc, master)
+    stdout = proc.stdout.read().decode()
+    proc.wait(timeout=60)
+    waited = time.monotonic() - t_signal
+    text = (seen + rest).decode(errors="replace")
+    assert proc.returncode == 143, text
+    assert "stopped by SIGTERM after 0 of 3 frames (no frames kept in" in text and "--resume" in text
+    assert "Traceback" not in text and stdout == ""
+    assert waited < 10  # a frame here is ~111,000 steps (tens of seconds): it did not run to its end
+    assert sorted(os.listdir(out)) == [".particles-run.json"]
+
+
+def test_quiet_or_not_a_terminal_draws_no_progress(tmp_path):
+    cfg = tmp_path / "q.toml"
+    cfg.write_text(CONFIG.replace("frames = 60", "frames = 2"))
+    proc, master, seen = run_on_terminal(["run", cfg, "--out", tmp_path / "o", "--quiet"], until=b"")
+    rest = read_rest(proc, master)
+    assert proc.wait(timeout=120) == 0 and (seen + rest) == b""

@@ -28,6 +28,7 @@ class ConfigError(Exception):
 
 
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+_LONG_KEY = 64
 
 
 def key_name(part) -> str:
@@ -35,6 +36,8 @@ def key_name(part) -> str:
     key holding a newline, a dot or nothing at all still names itself on one line."""
     if not isinstance(part, str):
         part = str(part)
+    if len(part) > _LONG_KEY:  # a 1 MB key must not make a 1 MB error line
+        return key_name(part[:_LONG_KEY // 2]) + f"...({len(part):,} characters)"
     if _BARE_KEY.fullmatch(part):
         return part
     out = ['"']
@@ -161,6 +164,7 @@ def apply_presets(data: dict):
 def validate(data: dict) -> Scene:
     if not isinstance(data, dict):
         raise ConfigError([f"config: expected a table of keys, got {type(data).__name__}"])
+    check_depth(data)
     data, problems = apply_presets(data)
     try:
         scene = Scene.model_validate(data)
@@ -171,25 +175,70 @@ def validate(data: dict) -> Scene:
     return scene
 
 
+MAX_CONFIG_BYTES = 1 << 20  # 1 MiB: the largest shipped config is about 3 KB
+MAX_DEPTH = 32  # tables and arrays nested deeper than this are refused (the schema needs 5)
+_BOM = b"\xef\xbb\xbf"
+
+
 def read_toml(path: Union[str, os.PathLike]) -> dict:
+    """The TOML table in ``path``: at most :data:`MAX_CONFIG_BYTES` bytes of UTF-8 (a leading BOM,
+    as Windows editors write, is skipped), nested at most :data:`MAX_DEPTH` deep. Only regular
+    files: a FIFO would block and ``/dev/zero`` never ends. Raises ConfigError (one line)."""
     p = os.fspath(path)
     if not os.path.exists(p):
         raise ConfigError([f"config: file not found: {p}"])
     if os.path.isdir(p):
         raise ConfigError([f"config: {p} is a directory, not a TOML file"])
+    if not os.path.isfile(p):
+        raise ConfigError([f"config: {p} is not a regular file (a device, FIFO or socket)"])
     try:
-        with open(p, "rb") as fh:
-            return tomllib.load(fh)
+        with open(p, "rb") as fh:  # bounded read: /proc files report size 0 but may hold more
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
+    except OSError as e:
+        raise ConfigError([f"config: cannot read {p}: {e.__class__.__name__}: {e}"]) from None
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError([f"config: {p} is larger than {MAX_CONFIG_BYTES // 1024} KB; "
+                           f"a config is a short text file"])
+    raw = raw[len(_BOM):] if raw.startswith(_BOM) else raw
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError([f"config: {p} is not UTF-8 text (byte 0x{raw[e.start]:02x} at offset "
+                           f"{e.start})"]) from None
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError([f"config: {p} is not valid TOML: {e}"]) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError([f"config: cannot read {p}: {e.__class__.__name__}: {e}"]) from None
+    except RecursionError:  # inline arrays/tables nested about a thousand deep
+        raise ConfigError([f"config: {p} nests arrays or tables more than {MAX_DEPTH} levels "
+                           f"deep"]) from None
+    check_depth(data, p)
+    return data
+
+
+def check_depth(data, where: str = "config") -> None:
+    """Refuse data nested deeper than :data:`MAX_DEPTH` (iteratively: no recursion to overflow),
+    before deepcopy or validation recurse into it."""
+    todo = [(data, 0)]
+    while todo:
+        node, depth = todo.pop()
+        if depth > MAX_DEPTH:
+            raise ConfigError([f"config: {where} nests arrays or tables more than {MAX_DEPTH} "
+                               f"levels deep"])
+        if isinstance(node, dict):
+            todo += [(v, depth + 1) for v in node.values()]
+        elif isinstance(node, list):
+            todo += [(v, depth + 1) for v in node]
 
 
 def load_config(path_or_dict, overrides: typing.Optional[dict] = None) -> Scene:
     """A validated :class:`Scene` from a TOML path or a dict; ``overrides`` are dotted keys
     (``{"solver.integrator": "rk4", "render.width": 320}``) applied before validation."""
-    data = read_toml(path_or_dict) if not isinstance(path_or_dict, dict) else copy.deepcopy(path_or_dict)
+    if isinstance(path_or_dict, dict):
+        check_depth(path_or_dict)
+        data = copy.deepcopy(path_or_dict)
+    else:
+        data = read_toml(path_or_dict)
     if isinstance(data, dict) and not data.get("name") and not isinstance(path_or_dict, dict):
         data["name"] = os.path.splitext(os.path.basename(os.fspath(path_or_dict)))[0]
     for key, value in (overrides or {}).items():

@@ -36,6 +36,9 @@ ColorStop = Annotated[List[Annotated[float, Field(ge=0, le=100)]], Field(min_len
 ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_length=2, max_length=2)]
 
 MAX_STOPS = 8
+MAX_FRAMES = 1_000_000  # frames in one run, whether given as `frames` or as duration × fps
+# Names of emitters, colliders and bodies: the API finds things by them, the run summary prints them
+Name = Annotated[str, Field(max_length=64)]
 
 
 def _check_curve(stops):
@@ -101,6 +104,13 @@ def _check_output(out: Optional[str]) -> Optional[str]:
     return out
 
 
+def _repeated_names(names) -> Optional[str]:
+    """The API moves, rates and removes things by name: two with one name would leave one of
+    them out of reach. Unnamed ("") items may repeat."""
+    dup = sorted({n for n in names if n and names.count(n) > 1})
+    return f"names must be unique, repeated: {', '.join(repr(n) for n in dup)}" if dup else None
+
+
 class Keyframe(Strict):
     """A point on a path: where something is at ``time`` (linear in between, held at the ends)."""
 
@@ -122,14 +132,14 @@ class SubEmitter(Strict):
     collider (with a velocity change of at least ``min_speed`` m/s)."""
 
     event: Literal["death", "collision"] = "death"
-    emitter: str
+    emitter: Name
     count: Annotated[int, Field(ge=1, le=64)] = 1
     min_speed: NonNeg = 1.0
 
 
 class Emitter(Strict):
-    name: str = ""
-    effect: Optional[str] = None  # a preset from effects/ that this emitter starts from
+    name: Name = ""
+    effect: Optional[Name] = None  # a preset from effects/ that this emitter starts from
     shape: Literal["point", "sphere", "box", "disc", "cone"] = "point"
     position: Vec3 = [0.0, 0.0, 0.0]
     path: List[Keyframe] = []
@@ -180,7 +190,7 @@ class Emitter(Strict):
 
 
 class _ColliderBase(Strict):
-    name: str = ""
+    name: Name = ""
     restitution: Fraction01 = 0.5
     friction: NonNeg = 0.0
     kill: bool = False  # particles that touch it die
@@ -258,7 +268,7 @@ class Body(Strict):
     from ``position``. jelly: a ``resolution = [nx, ny, nz]`` lattice of ``size = [x, y, z]``.
     Stiffness in N/m, damping in N·s/m, mass per node in kg."""
 
-    name: str = ""
+    name: Name = ""
     type: Literal["chain", "hair", "cloth", "jelly"]
     position: Vec3 = [0.0, 1.0, 0.0]
     direction: Vec3 = [0.0, -1.0, 0.0]
@@ -306,6 +316,13 @@ class Camera(Strict):
     look_at: Vec3 = [0.0, 1.0, 0.0]
     fov: Annotated[float, Field(gt=1, lt=170)] = 45.0  # vertical, degrees
 
+    @model_validator(mode="after")
+    def _check(self):
+        gap = math.dist(self.position, self.look_at)
+        return _report(self, [("look_at", f"{self.look_at} is where the camera stands (position "
+                               f"{self.position}): it must look at another point"
+                               if gap < 1e-6 else None)])
+
 
 class Solver(Strict):
     integrator: Literal["euler", "midpoint", "rk4", "symplectic_euler", "verlet"] = "symplectic_euler"
@@ -344,7 +361,7 @@ class Scene(Strict):
     seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
     fps: Annotated[float, Field(ge=1, le=1000)] = 30.0
     duration: Optional[Annotated[float, Field(gt=0, le=3600)]] = None
-    frames: Optional[Annotated[int, Field(ge=1, le=1_000_000)]] = None
+    frames: Optional[Annotated[int, Field(ge=1, le=MAX_FRAMES)]] = None
     camera: Camera = Camera()
     solver: Solver = Solver()
     forces: Forces = Forces()
@@ -385,8 +402,12 @@ class Scene(Strict):
                 problems.append((("emitters", i, "rate"), "an emitter needs a rate > 0, a burst, "
                                  "to be another emitter's sub-emitter, or emitting = false (driven "
                                  "from code)"))
-        dup = sorted({n for n in names if n and names.count(n) > 1})
-        problems.append(("emitters", f"names must be unique, repeated: {', '.join(dup)}" if dup else None))
+        for key, items in (("emitters", self.emitters), ("colliders", self.colliders),
+                           ("bodies", self.bodies)):
+            problems.append((key, _repeated_names([x.name for x in items])))
+        if self.frames is None and self.duration is not None and self.frame_count > MAX_FRAMES:
+            problems.append(("duration", f"{self.duration:g} s at fps {self.fps:g} is "
+                             f"{self.frame_count:,} frames; at most {MAX_FRAMES:,}"))
         slots = pool_sizes(self.emitters, 1.0 / self.fps)
         if sum(slots) > MAX_POOL:
             e = max(range(len(slots)), key=slots.__getitem__)

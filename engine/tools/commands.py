@@ -6,6 +6,7 @@ import os
 import sys
 import time
 
+from . import budget, flags
 from .errors import OutputFailure, SimulationError, Stopped, UserError
 from ..config import ConfigError, load_config, read_toml
 
@@ -19,11 +20,7 @@ def _overrides(args) -> dict:
     if getattr(args, "seed", None) is not None:
         o["seed"] = args.seed
     if getattr(args, "size", None):
-        try:
-            w, h = (int(v) for v in args.size.lower().split("x"))
-        except ValueError:
-            raise UserError(f"--size: {args.size!r} is not WxH (e.g. 640x360)") from None
-        o["render.width"], o["render.height"] = w, h
+        o["render.width"], o["render.height"] = flags.checked("--size", flags.size, args.size)
     return o
 
 
@@ -40,8 +37,6 @@ def scene_config(path, args=None):
 
 
 def load_scene_config(path, args):
-    if getattr(args, "frames", None) is not None and args.frames < 1:
-        raise UserError(f"--frames: {args.frames} is not allowed: must be >= 1")
     try:
         return scene_config(path, args)
     except ConfigError as e:
@@ -59,31 +54,6 @@ def output_dir(cfg, args) -> str:
         raise UserError(f"output: {out_dir!r} leads outside {OUTPUT_ROOT}/ (through a symbolic "
                         f"link); use --out for other places")
     return out_dir
-
-
-class Progress:
-    def __init__(self, total, quiet):
-        self.total, self.quiet = total, quiet
-        self.t0 = time.perf_counter()
-        self.tty = sys.stderr.isatty()
-        self._last = 0.0
-
-    def update(self, frame, alive):
-        if self.quiet:
-            return
-        now = time.perf_counter()
-        if not self.tty and now - self._last < 2.0 and frame < self.total:
-            return
-        self._last = now
-        fps = frame / max(now - self.t0, 1e-9)
-        bar = "#" * int(24 * frame / self.total)
-        line = f"[{bar:<24}] frame {frame}/{self.total}  {fps:5.1f} frames/s  live {alive:,}"
-        print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", file=sys.stderr,
-              flush=True)
-
-    def done(self):
-        if not self.quiet and self.tty:
-            print(file=sys.stderr)
 
 
 def _open_output(cfg, args, out_dir) -> int:
@@ -112,40 +82,123 @@ def _open_output(cfg, args, out_dir) -> int:
     return first
 
 
-def cmd_run(args) -> int:
-    from ..render.output import FrameWriter, OutputError
-    from ..scene import DivergenceError, Scene
-    from .signals import StopRequest
+def _even_for_mp4(cfg, args) -> None:
+    """H.264 (yuv420p) needs even sides: refuse odd ones naming where they came from."""
+    W, H = cfg.render.width, cfg.render.height
+    if args.format != "mp4" or not (W % 2 or H % 2):
+        return
+    fix = f"{W - W % 2}x{H - H % 2}"
+    if getattr(args, "size", None):
+        raise UserError(f"--size: {args.size} is not allowed with --format mp4: H.264 needs an even "
+                        f"width and height (e.g. --size {fix})")
+    key = "render.width" if W % 2 else "render.height"
+    raise UserError(f"{args.config}: {key}: {W if W % 2 else H} is odd; --format mp4 (H.264) needs "
+                    f"an even width and height: set it, or pass --size {fix}")
 
+
+def _auto_substeps(cfg):
+    """Substeps per frame the stiffness guard will pick for bodies with ``substeps = "auto"``
+    (engine.bodies builds the same network): bounded work needs them before the run starts."""
+    import numpy as np
+
+    from ..bodies import build_topology
+    from ..springs.stability import StiffnessError, auto_substeps, network_bounds
+
+    def substeps(k, b):
+        method = b.integrator or cfg.solver.integrator
+        if isinstance(b.substeps, int) or method == "xpbd":
+            return b.substeps if isinstance(b.substeps, int) else 1
+        top = build_topology(b)
+        pinned = np.zeros(top.node_count, bool)
+        pinned[np.asarray(top.pinned, np.int64)] = True
+        try:
+            return auto_substeps(method, 1.0 / cfg.fps, network_bounds(top, pinned))
+        except StiffnessError:
+            return 1  # the scene refuses it with its own message when it is built
+    return substeps
+
+
+def check_budget(cfg, args, workers: int) -> budget.Estimate:
+    """Refuse a run whose memory or work passes the limits (one line each, naming the flag)."""
+    from ..render.output import FrameWriter
+
+    limits = (getattr(args, "max_memory", None) or budget.DEFAULT_MAX_MEMORY,
+              getattr(args, "max_steps", None) or budget.DEFAULT_MAX_STEPS,
+              getattr(args, "max_work", None) or budget.DEFAULT_MAX_WORK)
+    in_flight = FrameWriter.frames_in_flight(args.format, workers)
+    est = budget.estimate(cfg, cfg.render.width, cfg.render.height, in_flight)
+    problems = budget.problems(est, *limits)
+    if not problems and any(b.substeps == "auto" for b in cfg.bodies):  # memory is known fine now
+        est = budget.estimate(cfg, cfg.render.width, cfg.render.height, in_flight,
+                              body_substeps=_auto_substeps(cfg))
+        problems = budget.problems(est, *limits)
+    if problems:
+        raise UserError("\n".join(problems))
+    return est
+
+
+def render_frames(scene, writer, first: int, total: int, stop=None, bar=None):
+    """The frame loop of ``particles run``: simulate frames 0..total-1, render and submit those
+    from ``first`` on, stop early when ``stop.requested`` (a signal; ``runtime.Interrupted``
+    ends a frame mid-way), then flush the writer. Returns (simulation failure, output failure),
+    each an exception or None; the writer is closed either way."""
+    from .. import runtime
+    from ..render.output import OutputError
+    from ..scene import DivergenceError
+
+    failure = out_failure = None
+    try:
+        for k in range(total):
+            if stop is not None and stop.requested:
+                break
+            scene.advance_frame()  # raises runtime.Interrupted mid-frame on a signal
+            if k >= first:  # --resume: frames before `first` are on disk already
+                writer.submit(k, scene.render())
+            if bar is not None:
+                bar.advance(note=f"live {scene.stats.alive:,}")
+    except runtime.Interrupted:
+        pass  # stop.requested says so
+    except DivergenceError as e:
+        failure = e
+    except OutputError as e:
+        out_failure = e
+    stopped = stop is not None and stop.requested
+    try:
+        writer.close(finished=failure is None and out_failure is None and not stopped)
+    except OutputError as e:
+        out_failure = out_failure or e
+    return failure, out_failure
+
+
+def cmd_run(args) -> int:
+    """``particles run``: checks (flags, config, MP4 sizes, output folder, budgets) before any
+    work, then simulates every frame and renders from the first one not on disk."""
+    from ..render.output import FrameWriter, default_workers
+    from ..scene import Scene
+    from .progress import progress
+    from .signals import stopping
+
+    flags.check(args, flags.RUN_FLAGS)
+    if not getattr(args, "format", None):
+        args.format = "png"
     cfg = load_scene_config(args.config, args)
+    _even_for_mp4(cfg, args)
     out_dir = output_dir(cfg, args)
+    workers = getattr(args, "workers", None) or default_workers()
+    check_budget(cfg, args, workers)
+    total = cfg.frame_count
     first = _open_output(cfg, args, out_dir)
+    if first >= total:
+        print(f"{cfg.name}: nothing to resume: {out_dir} already holds {first} whole frame(s) of "
+              f"{total}")
+        return 0
     t_start = time.perf_counter()
     scene = Scene(cfg)
     t_built = time.perf_counter()
-    total = cfg.frame_count
-    writer = FrameWriter(out_dir, args.format, cfg.fps, cfg.name)
-    progress = Progress(total, args.quiet)
-    failure = out_failure = None
-    with StopRequest() as stop:
-        try:
-            for k in range(total):
-                if stop.requested:
-                    break
-                scene.advance_frame()
-                if k >= first:  # --resume: frames before `first` are on disk already
-                    writer.submit(k, scene.render()[..., :3])
-                progress.update(k + 1, scene.stats.alive)
-        except DivergenceError as e:
-            failure = e
-        except OutputError as e:
-            out_failure = e
-        finally:
-            progress.done()
-        try:
-            writer.close(finished=failure is None and out_failure is None and not stop.requested)
-        except OutputError as e:
-            out_failure = out_failure or e
+    writer = FrameWriter(out_dir, args.format, cfg.fps, cfg.name, workers=workers)
+    with stopping(raise_now=False) as stop:
+        with progress(total, unit="frames", label=cfg.name, quiet=getattr(args, "quiet", False)) as bar:
+            failure, out_failure = render_frames(scene, writer, first, total, stop, bar)
     wall = time.perf_counter() - t_start
     st = scene.stats
     done = first + len(writer.written) if args.format == "png" else 0
@@ -155,9 +208,9 @@ def cmd_run(args) -> int:
     if failure is not None:
         raise SimulationError(f"{failure} ({kept})")
     if stop.requested:
-        raise Stopped(f"stopped by {stop.name} after {st.frames} of {total} frames ({kept}); "
+        raise Stopped(f"stopped by {stop.name} after {done} of {total} frames ({kept}); "
                       f"continue with --resume", stop.signum)
-    sim_fps = st.frames / max(time.perf_counter() - t_built, 1e-9)
+    sim_fps = (total - first) / max(time.perf_counter() - t_built, 1e-9)
     dropped = scene.dropped()
     parts = []
     if scene.particles is not None:
@@ -171,7 +224,7 @@ def cmd_run(args) -> int:
                      f"{sysm.substeps_for(scene.frame_dt)} substeps/frame")
     print(f"{cfg.name}: {st.frames} frames ({args.format}) in {out_dir}"
           f"{f' (resumed at frame {first})' if first else ''}; " + "; ".join(parts)
-          + f"; {wall:.2f} s wall ({sim_fps:.1f} frames/s after {t_built - t_start:.2f} s build)")
+          + f"; {wall:.2f} s wall ({sim_fps:.1f} frames/s rendered after {t_built - t_start:.2f} s build)")
     if dropped:
         print(f"warning: {dropped:,} particles did not fit their emitters' pools "
               f"(raise the emitter's capacity)", file=sys.stderr)
@@ -195,6 +248,8 @@ def cmd_list(args) -> int:
     from effects import PRESETS
 
     root = args.dir
+    if not os.path.isdir(root):
+        raise UserError(f"--dir: {root!r} is not a folder")
     print(f"configs in {root}/:")
     for path in sorted(glob.glob(os.path.join(root, "*.toml"))):
         try:

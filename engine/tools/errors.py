@@ -1,13 +1,15 @@
 """What the command-line tools raise for the user: one line per problem, never a traceback.
 
 Exit codes: 0 ok, 2 bad input, 3 simulation failure, 4 output failure (folder cannot be created or
-written, disk full), 128 + signal number when stopped by SIGINT (130) or SIGTERM (143). Kept in
+written, disk full), 128 + signal number when stopped by SIGINT (130) or SIGTERM (143), 141 when
+stdout's reader went away. Kept in
 their own module so that ``cli`` (which dispatches), ``commands`` and ``viewer`` (which raise)
 import it and not each other.
 """
 from __future__ import annotations
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_SIM_FAILED, EXIT_OUTPUT_FAILED = 0, 2, 3, 4
+EXIT_BROKEN_PIPE = 128 + 13  # stdout closed by its reader (SIGPIPE's code, as `yes | head` gives)
 
 
 class UserError(Exception):

@@ -10,6 +10,8 @@ import time
 
 from PIL import Image
 
+from ..render.output import as_rgb, replacing
+
 # config → (seconds into the effect, size)
 SHOTS = {
     "sparks": (2.0, (480, 270)),
@@ -35,21 +37,30 @@ def render_still(config_path: str, seconds: float, size, out_path: str) -> dict:
     frames = max(1, round(seconds * cfg.fps))
     for _ in range(frames):
         scene.advance_frame()
-    img = scene.render()[..., :3]
-    tmp = out_path + ".tmp"
-    Image.fromarray(img).save(tmp, format="PNG", optimize=True)
-    os.replace(tmp, out_path)
+    img = as_rgb(scene.render())
+    with replacing(out_path) as tmp:
+        Image.fromarray(img).save(tmp, format="PNG", optimize=True)
     return {"path": out_path, "bytes": os.path.getsize(out_path), "frames": frames,
             "peak": scene.stats.peak_alive, "seconds": time.perf_counter() - t0}
 
 
 def cmd_gallery(args) -> int:
+    from .errors import UserError
+    from .progress import progress
+
+    if not os.path.isdir(args.configs):
+        raise UserError(f"--configs: {args.configs!r} is not a folder")
+    shots = [(n, s) for n, s in SHOTS.items() if os.path.exists(os.path.join(args.configs, f"{n}.toml"))]
+    if not shots:
+        raise UserError(f"--configs: {args.configs!r} holds none of {', '.join(SHOTS)} (.toml)")
     os.makedirs(args.out, exist_ok=True)
-    for name, (seconds, size) in SHOTS.items():
-        path = os.path.join(args.configs, f"{name}.toml")
-        if not os.path.exists(path):
-            continue
-        r = render_still(path, seconds, size, os.path.join(args.out, f"{name}.png"))
-        print(f"{r['path']}: {r['bytes'] / 1024:.0f} KB, t={seconds:g} s, "
-              f"peak {r['peak']:,} particles, {r['seconds']:.1f} s")
+    with progress(len(shots), unit="stills", label="particles gallery",
+                  quiet=getattr(args, "quiet", False)) as bar:
+        for name, (seconds, size) in shots:
+            bar.advance(0, note=name)
+            r = render_still(os.path.join(args.configs, f"{name}.toml"), seconds, size,
+                             os.path.join(args.out, f"{name}.png"))
+            print(f"{r['path']}: {r['bytes'] / 1024:.0f} KB, t={seconds:g} s, "
+                  f"peak {r['peak']:,} particles, {r['seconds']:.1f} s", flush=True)
+            bar.advance(note=name)
     return 0

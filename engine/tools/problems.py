@@ -23,6 +23,7 @@ class Problem:
     reference_end: Optional[tuple] = None  # trusted y(t1) when there is no closed form
     invariant: Optional[Callable[[np.ndarray], np.ndarray]] = None
     second_order: bool = False  # y = (q, p): symplectic methods apply
+    labels: tuple = ()  # a name per component of y (the CSV header of `particles ode`)
 
     def y_end(self) -> np.ndarray:
         if self.exact is not None:
@@ -41,8 +42,10 @@ def _decay(y, t):
     return -0.5 * y
 
 
-GROWTH = Problem("growth", _growth, (1.0,), (0.0, 1.0), exact=lambda t: np.array([np.exp(t)]))
-DECAY = Problem("decay", _decay, (1.0,), (0.0, 4.0), exact=lambda t: np.array([np.exp(-0.5 * t)]))
+GROWTH = Problem("growth", _growth, (1.0,), (0.0, 1.0), exact=lambda t: np.array([np.exp(t)]),
+                 labels=("x",))
+DECAY = Problem("decay", _decay, (1.0,), (0.0, 4.0), exact=lambda t: np.array([np.exp(-0.5 * t)]),
+                labels=("x",))
 
 
 # Harmonic oscillator q'' = −ω² q with ω = 2: y = (q, p)
@@ -55,7 +58,7 @@ def _oscillator(y, t):
 
 
 OSCILLATOR = Problem(
-    "oscillator", _oscillator, (1.0, 0.0), (0.0, 10.0), second_order=True,
+    "oscillator", _oscillator, (1.0, 0.0), (0.0, 10.0), second_order=True, labels=("q", "p"),
     exact=lambda t: np.array([np.cos(2 * t), -2 * np.sin(2 * t)]),
     invariant=lambda y: 0.5 * y[1] ** 2 + 2.0 * y[0] ** 2,
 )
@@ -88,7 +91,7 @@ def _drag_exact(t, y0=(0.0, 0.0, 10.0, 10.0)):
 
 
 DRAG = Problem("projectile_drag", _drag, (0.0, 0.0, 10.0, 10.0), (0.0, 2.0), exact=_drag_exact,
-               second_order=True)
+               second_order=True, labels=("x", "z", "vx", "vz"))
 
 
 # Lotka–Volterra with scipy's parameters (a, b, c, d) = (1.5, 1, 3, 1):
@@ -112,7 +115,7 @@ def _lv_invariant(y):
 
 LOTKA_VOLTERRA = Problem(
     "lotka-volterra", _lv, (1.0, 1.0), (0.0, 10.0),
-    reference_end=(1.02634477, 0.90969108), invariant=_lv_invariant,
+    reference_end=(1.02634477, 0.90969108), invariant=_lv_invariant, labels=("x", "y"),
 )
 
 
@@ -132,6 +135,7 @@ def _kepler(y, t):
 KEPLER = Problem(
     "kepler", _kepler, (0.1, 0.0, 0.0, float(np.sqrt(19.0))), (0.0, 2 * np.pi),
     reference_end=(0.1, 0.0, 0.0, float(np.sqrt(19.0))), second_order=True,
+    labels=("x", "y", "vx", "vy"),
 )
 
 
@@ -159,9 +163,10 @@ def _damped_spring_exact(t, y0=(1.0, 0.0)):
 
 DAMPED_SPRING = Problem(
     "damped_spring", _damped_spring, (1.0, 0.0), (0.0, 2.0), exact=_damped_spring_exact,
-    second_order=True,
+    second_order=True, labels=("q", "v"),
     invariant=lambda y: 0.5 * _DS_M * y[1] ** 2 + 0.5 * _DS_KS * y[0] ** 2,
 )
 
 PROBLEMS = {p.name: p for p in (GROWTH, DECAY, OSCILLATOR, DRAG, DAMPED_SPRING, LOTKA_VOLTERRA,
                                   KEPLER)}
+assert all(len(p.labels) == len(p.y0) for p in PROBLEMS.values())

@@ -5,7 +5,7 @@ bandwidth limit), ``frame`` (a full 1M-particle frame), ``effects`` (every shipp
 runs it, and an empty scene's fixed frame cost), ``ode`` (adaptive RK4 against scipy's
 RK45 at equal error), ``startup`` (cold and warm ``particles run``), ``features`` (the cost of each
 optional feature and proof that an unused one compiles nothing), ``cloth`` (when
-``engine.springs`` exists). ``quick`` uses small sizes so CI can run it in seconds.
+``engine.springs`` exists), ``output`` (``particles run``'s frame rate against sim + render). ``quick`` uses small sizes so CI can run it in seconds.
 """
 from __future__ import annotations
 
@@ -15,15 +15,17 @@ import time
 
 from .common import Row, format_table
 
-SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth")
-_MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy", "startup": "startup",
-            "features": "features", "cloth": "cloth"}
+SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output")
+_MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy",
+            "startup": "startup", "features": "features", "cloth": "cloth", "output": "output"}
 
 
-def run(quick: bool = False, only=None, echo=None):
+def run(quick: bool = False, only=None, echo=None, quiet: bool = True):
     """Run the sections (all, or those named in ``only``) and return their rows in order.
-    ``echo(text)`` is called with each section's rows as it finishes (progress for long runs)."""
+    ``echo(text)`` is called with each section's rows as it finishes; a progress display over
+    the sections is drawn on a terminal unless ``quiet``."""
     from ... import runtime
+    from ..progress import progress
 
     runtime.ensure_init()
     names = list(SECTIONS) if not only else list(only)
@@ -31,13 +33,16 @@ def run(quick: bool = False, only=None, echo=None):
     if unknown:
         raise ValueError(f"--only: unknown section(s) {', '.join(unknown)}; allowed: {', '.join(SECTIONS)}")
     rows = []
-    for name in names:
-        mod = importlib.import_module(f".{_MODULES[name]}", __name__)
-        t0 = time.perf_counter()
-        got = mod.run(quick=quick)
-        rows += got
-        if echo is not None:
-            echo(format_table(got) + f"\n  ({name}: {time.perf_counter() - t0:.1f} s)")
+    with progress(len(names), unit="sections", label="particles bench", quiet=quiet) as bar:
+        for name in names:
+            bar.advance(0, note=name)
+            mod = importlib.import_module(f".{_MODULES[name]}", __name__)
+            t0 = time.perf_counter()
+            got = mod.run(quick=quick)
+            rows += got
+            if echo is not None:
+                echo(format_table(got) + f"\n  ({name}: {time.perf_counter() - t0:.1f} s)")
+            bar.advance(note=name)
     return rows
 
 
@@ -57,9 +62,9 @@ def header() -> str:
             f"cpu={cpu}  python={platform.python_version()}  taichi={'.'.join(map(str, ti.__version__))}")
 
 
-def main(quick: bool = False, only=None) -> int:
+def main(quick: bool = False, only=None, quiet: bool = False) -> int:
     print(header(), flush=True)
-    rows = run(quick=quick, only=only, echo=lambda s: print(s, flush=True))
+    rows = run(quick=quick, only=only, echo=lambda s: print(s, flush=True), quiet=quiet)
     bad = [r for r in rows if not r.finite_positive]
     if bad:
         print("non-finite or non-positive figures: " + ", ".join(r.name for r in bad), file=sys.stderr)

@@ -30,7 +30,8 @@ _NUMERICS_REFS = {
 }
 
 
-def _selection(which) -> List[str]:
+def selection(which, key: str = "which") -> List[str]:
+    """The chart names ``which`` stands for (None: all); ValueError naming ``key`` otherwise."""
     from .workprec import CASES
 
     allowed = list(CHARTS) + list(CASES)
@@ -39,62 +40,95 @@ def _selection(which) -> List[str]:
     names = [which] if isinstance(which, str) else list(which)
     bad = [n for n in names if n not in allowed]
     if bad:
-        raise ValueError(f"which: unknown chart {bad[0]!r}; allowed: {', '.join(allowed)}")
+        raise ValueError(f"{key}: unknown chart {bad[0]!r}; allowed: {', '.join(allowed)}")
     return names
 
 
 def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
-               which: Optional[Union[str, Iterable[str]]] = None) -> List[str]:
+               which: Optional[Union[str, Iterable[str]]] = None, quiet: bool = True) -> List[str]:
     """Compute and write the charts; return the paths written (CSV and PNG).
 
-    which: None for all, or names among ``workprec``, ``stability``, ``energy`` and the
-    work–precision problem names (``kepler`` …) for one problem's diagram only.
+    which: None for all, or names among ``workprec``, ``stability``, ``energy``, ``scenes`` and
+    the work–precision problem names (``kepler`` …) for one problem's diagram only.
     quick: coarser sweeps and shorter runs (well under a minute in total), for tests.
+    quiet: no progress display (it is drawn only on a terminal anyway).
+    Every file is written under a temporary name and renamed when whole.
     """
+    from ..progress import progress
     from . import plot
-    from .workprec import CASES, FIELDS, T_LABEL, require_scipy, work_precision
+    from .workprec import require_scipy
 
     plot.require_matplotlib()
     require_scipy()
-    names = _selection(which)
+    names = selection(which)
     os.makedirs(out_dir, exist_ok=True)
+    jobs = _jobs(names, out_dir, quick)
     written: List[str] = []
-    problems = [n for n in CASES if "workprec" in names or n in names]
-    for name in problems:
-        rows = work_precision(name, quick=quick)
-        case = CASES[name]
-        T = T_LABEL.get(name, f"T = {case.problem.t_span[1]:g}")
-        base = os.path.join(out_dir, f"workprec_{name}")
-        written.append(plot.write_csv(base + ".csv", rows, FIELDS))
-        title = (f"Work–precision, {name} ({T}): fixed h for every method, step doubling over "
-                 f"tol = rtol (atol = tol·1e-3), scipy solve_ivp as anchor")
-        written.append(plot.work_precision_png(base + ".png", rows, title, _NUMERICS_REFS.get(name, ())))
+    with progress(len(jobs), unit="charts", label="particles chart", quiet=quiet) as bar:
+        for label, job in jobs:
+            bar.advance(0, note=label)
+            written += job()
+            bar.advance(note=label)
+    return written
+
+
+def _jobs(names, out_dir, quick):
+    """(label, job) per chart: each job computes its rows and returns the files it wrote."""
+    from . import plot
+    from .workprec import CASES, FIELDS, T_LABEL, work_precision
+
+    jobs = []
+
+    def workprec_job(name):
+        def job():
+            rows = work_precision(name, quick=quick)
+            T = T_LABEL.get(name, f"T = {CASES[name].problem.t_span[1]:g}")
+            base = os.path.join(out_dir, f"workprec_{name}")
+            title = (f"Work–precision, {name} ({T}): fixed h for every method, step doubling over "
+                     f"tol = rtol (atol = tol·1e-3), scipy solve_ivp as anchor")
+            return [plot.write_csv(base + ".csv", rows, FIELDS),
+                    plot.work_precision_png(base + ".png", rows, title, _NUMERICS_REFS.get(name, ()))]
+        return job
+
+    for name in CASES:
+        if "workprec" in names or name in names:
+            jobs.append((f"work-precision {name}", workprec_job(name)))
     if "scenes" in names:
         from .scenes import cloth_rows, sparks_rows
 
-        for name, fn, what in (("sparks", sparks_rows, "sparks fountain, T = 1 s, colliders"),
-                               ("cloth", cloth_rows, "16×16 cloth pinned at two corners, T = 1 s")):
-            rows = fn(quick=quick)
-            base = os.path.join(out_dir, f"workprec_scene_{name}")
-            written.append(plot.write_csv(base + ".csv", rows, FIELDS))
-            written.append(plot.work_precision_png(
-                base + ".png", rows, f"Work–precision on a real scene: {what}; error against the "
-                f"same scene at a much smaller h (RK4)"))
+        def scene_job(name, fn, what):
+            def job():
+                rows = fn(quick=quick)
+                base = os.path.join(out_dir, f"workprec_scene_{name}")
+                return [plot.write_csv(base + ".csv", rows, FIELDS),
+                        plot.work_precision_png(
+                            base + ".png", rows, f"Work–precision on a real scene: {what}; error "
+                            f"against the same scene at a much smaller h (RK4)")]
+            return job
+
+        jobs.append(("scene sparks", scene_job("sparks", sparks_rows,
+                                               "sparks fountain, T = 1 s, colliders")))
+        jobs.append(("scene cloth", scene_job("cloth", cloth_rows,
+                                              "16×16 cloth pinned at two corners, T = 1 s")))
     if "stability" in names:
-        from .stability import NUMERICS_TABLE, stability_rows
+        def stability_job():
+            from .stability import NUMERICS_TABLE, stability_rows
 
-        rows = stability_rows(quick=quick)
-        base = os.path.join(out_dir, "stability")
-        written.append(plot.write_csv(base + ".csv", rows, list(rows[0])))
-        written.append(plot.stability_png(base + ".png", rows, NUMERICS_TABLE))
+            rows = stability_rows(quick=quick)
+            base = os.path.join(out_dir, "stability")
+            return [plot.write_csv(base + ".csv", rows, list(rows[0])),
+                    plot.stability_png(base + ".png", rows, NUMERICS_TABLE)]
+        jobs.append(("stability", stability_job))
     if "energy" in names:
-        from .energy import H, TITLES, energy_drift
+        def energy_job():
+            from .energy import H, TITLES, energy_drift
 
-        rows = energy_drift(quick=quick)
-        base = os.path.join(out_dir, "energy_drift")
-        written.append(plot.write_csv(base + ".csv", rows, list(rows[0])))
-        written.append(plot.energy_png(base + ".png", rows, H, TITLES))
-    return written
+            rows = energy_drift(quick=quick)
+            base = os.path.join(out_dir, "energy_drift")
+            return [plot.write_csv(base + ".csv", rows, list(rows[0])),
+                    plot.energy_png(base + ".png", rows, H, TITLES)]
+        jobs.append(("energy drift", energy_job))
+    return jobs
 
 
 def main(argv=None) -> int:
@@ -113,4 +147,4 @@ def main(argv=None) -> int:
     return 0
 
 
-__all__ = ["run_charts", "main", "CHARTS"]
+__all__ = ["run_charts", "selection", "main", "CHARTS"]

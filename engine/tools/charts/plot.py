@@ -5,6 +5,8 @@ from typing import Dict, List, Sequence
 
 import numpy as np
 
+from ...render.output import replacing
+
 COLORS = {"euler": "tab:red", "midpoint": "tab:orange", "rk4": "tab:blue",
           "rk4+extrap": "tab:cyan", "symplectic_euler": "tab:green", "verlet": "tab:purple",
           "scipy RK45": "0.45", "scipy DOP853": "black"}
@@ -24,11 +26,21 @@ def require_matplotlib():
 
 
 def write_csv(path, rows: List[dict], fields: Sequence[str]) -> str:
-    with open(path, "w", newline="") as fh:
+    with replacing(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(fields), extrasaction="ignore")
         w.writeheader()
         for r in rows:
             w.writerow({k: (f"{v:.6e}" if isinstance(v, float) else v) for k, v in r.items()})
+    return str(path)
+
+
+def _save(fig, path) -> str:
+    """Write the figure as PNG under a temporary name, renamed when whole; close it."""
+    import matplotlib.pyplot as plt
+
+    with replacing(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
     return str(path)
 
 
@@ -71,9 +83,7 @@ def work_precision_png(path, rows: List[dict], title: str, refs=()) -> str:
     h, lab = axes[0].get_legend_handles_labels()
     fig.legend(h, lab, loc="center right", fontsize=8.5, frameon=True)
     fig.tight_layout(rect=(0, 0, 0.82, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)
+    return _save(fig, path)
 
 
 def stability_png(path, rows: List[dict], table: dict) -> str:
@@ -120,9 +130,7 @@ def stability_png(path, rows: List[dict], table: dict) -> str:
                 lab.append(ll)
     fig.legend(h, lab, loc="lower center", ncol=len(lab), fontsize=9.5)
     fig.tight_layout(rect=(0, 0.07, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)
+    return _save(fig, path)
 
 
 def energy_png(path, rows: List[dict], h: float, titles=None) -> str:
@@ -146,6 +154,4 @@ def energy_png(path, rows: List[dict], h: float, titles=None) -> str:
                  "midpoint's slowly, RK4's decays slowly;\nsymplectic Euler's and Verlet's error "
                  "stays bounded (a straight rising line here is error ∝ t)", fontsize=11)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return str(path)
+    return _save(fig, path)
