@@ -10,9 +10,9 @@ import pytest
 import taichi as ti
 
 from engine.ode import METHODS, TABLEAUS, ButcherTableau, StepDoublingController, solve
-from engine.ode.controller import clip_to_target
-from engine.tools.problems import GROWTH, LOTKA_VOLTERRA, OSCILLATOR
+from engine.ode.driver import clip_to_target
 from engine.ode.steppers import doubling_step
+from engine.tools.problems import GROWTH, LOTKA_VOLTERRA, OSCILLATOR
 
 
 def test_tableaus_satisfy_invariants():
