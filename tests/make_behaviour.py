@@ -1,6 +1,6 @@
 """Record what the simulation does (not how it looks) as fixtures for tests/test_behaviour.py.
 
-    python tests/make_behaviour.py            # rewrite tests/behaviour/*.npz (say why in the commit)
+    python tests/make_behaviour.py [NAME ...]   # rewrite tests/behaviour/*.npz (say why in the commit)
 
 * ``frames_<config>.npz``: the live particles of a shipped config after a few frames (positions,
   velocities, ages, emitter ids in pool order) — the particle pipeline's result, independent of
@@ -28,17 +28,25 @@ from engine import runtime  # noqa: E402
 OUT = os.path.join(HERE, "behaviour")
 
 
-def main():
+def fixtures():
+    """{fixture name: function returning its arrays}."""
+    out = {f"frames_{name}": (lambda name=name, n=n: particle_frames(name, n)) for name, n in FRAME_SHOTS.items()}
+    out.update(cloth_fixed=fixed_cloths, h_particles=adaptive_particles, h_cloth=adaptive_cloth)
+    return out
+
+
+def main(names=()):
     runtime.init("cpu")
     os.makedirs(OUT, exist_ok=True)
-    for name, frames in FRAME_SHOTS.items():
-        np.savez_compressed(os.path.join(OUT, f"frames_{name}.npz"), **particle_frames(name, frames))
-    np.savez_compressed(os.path.join(OUT, "cloth_fixed.npz"), **fixed_cloths())
-    np.savez_compressed(os.path.join(OUT, "h_particles.npz"), **adaptive_particles())
-    np.savez_compressed(os.path.join(OUT, "h_cloth.npz"), **adaptive_cloth())
-    for f in sorted(os.listdir(OUT)):
-        print(os.path.join(OUT, f), os.path.getsize(os.path.join(OUT, f)), "bytes")
+    todo = fixtures()
+    unknown = sorted(set(names) - set(todo))
+    if unknown:
+        raise SystemExit(f"unknown fixture(s) {', '.join(unknown)}; known: {', '.join(todo)}")
+    for name in names or todo:
+        path = os.path.join(OUT, f"{name}.npz")
+        np.savez_compressed(path, **todo[name]())
+        print(path, os.path.getsize(path), "bytes")
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])
