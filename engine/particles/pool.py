@@ -46,6 +46,7 @@ PARTICLE_FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_lif
                    "particle_emitter", "particle_rand")
 
 
+@ti.data_oriented
 class ParticleState:
     """State of every slot, shape (capacity,):
 
