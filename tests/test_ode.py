@@ -30,6 +30,22 @@ def test_bad_tableau_is_rejected_at_construction():
         ButcherTableau("bad", 1, c=(F(0),), a=((),), b=(F(1, 2),))
 
 
+def test_bad_splitting_is_rejected_at_construction():
+    from engine.ode.splitting import DRIFT, KICK, Splitting
+
+    with pytest.raises(ValueError, match="first operation must be a kick"):
+        Splitting("bad", 1, ((DRIFT, F(1), F(0)), (KICK, F(1), F(0))))
+    with pytest.raises(ValueError, match="sum to 1"):
+        Splitting("bad", 2, ((KICK, F(1, 2), F(0)), (DRIFT, F(1), F(1, 2))))
+
+
+def test_stability_polynomials_come_from_the_tableaus():
+    # explicit RK with s = p stages: R(z) = Σ_{k ≤ p} z^k / k! (Hairer & Wanner II, §IV.2)
+    assert TABLEAUS["euler"].stability_polynomial() == (1, 1)
+    assert TABLEAUS["midpoint"].stability_polynomial() == (1, 1, F(1, 2))
+    assert TABLEAUS["rk4"].stability_polynomial() == (1, 1, F(1, 2), F(1, 6), F(1, 24))
+
+
 def _global_errors(method, ns, T=2.0, extrapolate=False):
     errs = []
     for n in ns:

@@ -33,19 +33,17 @@ class Splitting:
     ops: Tuple[Op, ...]
 
     def __post_init__(self) -> None:
-        if not self.ops or self.ops[0][0] != KICK or self.ops[0][2] != 0:
-            raise ValueError(f"{self.name}: the first operation must be a kick at c = 0")
-        for kind, w, c in self.ops:
-            if kind not in (KICK, DRIFT):
-                raise ValueError(f"{self.name}: unknown operation {kind!r}")
-            if not 0 <= c <= 1:
-                raise ValueError(f"{self.name}: c = {c} outside [0, 1]")
-        for kind in (KICK, DRIFT):
-            total = sum((w for k, w, _ in self.ops if k == kind), F(0))
-            if total != 1:
-                raise ValueError(f"{self.name}: {kind} weights sum to {total}, not 1 (inconsistent)")
-        if self.order < 1:
-            raise ValueError(f"{self.name}: order must be >= 1")
+        ops = self.ops
+        sums = {kind: sum((w for k, w, _ in ops if k == kind), F(0)) for kind in (KICK, DRIFT)}
+        for bad, why in (
+                (not ops or ops[0][0] != KICK or ops[0][2] != 0, "the first operation must be a kick at c = 0"),
+                (any(k not in sums for k, _, _ in ops), f"operations are {KICK!r} or {DRIFT!r}"),
+                (any(not 0 <= c <= 1 for _, _, c in ops), "every time c must lie in [0, 1]"),
+                (any(total != 1 for total in sums.values()),
+                 f"kick and drift weights must each sum to 1 (consistency), got {sums}"),
+                (self.order < 1, "order must be >= 1")):
+            if bad:
+                raise ValueError(f"{self.name}: {why}")
 
     @property
     def evaluations(self) -> int:

@@ -23,33 +23,24 @@ from .steppers import coefficients, lincomb, scaled_error
 
 
 @ti.kernel
-def _rk_stage(x: ti.template(), v: ti.template(), a: ti.template(), vs: ti.template(),
-              yx: ti.template(), yv: ti.template(), n: ti.i32, h: ti.f64, row: ti.template()):
-    """Stage j = len(row): yx, yv = the stage state; vs[j] = its velocity."""
-    j = ti.static(len(row))
+def _rk_lincomb(x: ti.template(), v: ti.template(), a: ti.template(), vs: ti.template(),
+                yx: ti.template(), yv: ti.template(), n: ti.i32, h: ti.f64, coef: ti.template(),
+                final: ti.template()):
+    """(x, v) + h Σ_m coef_m (V_m, A_m) over the stages so far (m < len(coef), V_0 = v): stage
+    j = len(coef) into yx, yv and vs[j]; with ``final`` (coef = b) the step's result into x, v."""
+    j = ti.static(len(coef))
     for i in range(n):
         hh = ti.cast(h, x.dtype)
         kx, kv = [v[i]] * j, [a[0, i]] * j
         for m in ti.static(range(1, j)):
             kx[m], kv[m] = vs[m, i], a[m, i]
-        yx[i] = lincomb(x[i], hh, row, kx, x.dtype)
-        vj = lincomb(v[i], hh, row, kv, x.dtype)
-        yv[i] = vj
-        vs[j, i] = vj
-
-
-@ti.kernel
-def _rk_combine(x: ti.template(), v: ti.template(), a: ti.template(), vs: ti.template(), n: ti.i32,
-                h: ti.f64, b: ti.template()):
-    s = ti.static(len(b))
-    for i in range(n):
-        hh = ti.cast(h, x.dtype)
-        kx, kv = [v[i]] * s, [a[0, i]] * s
-        for m in ti.static(range(1, s)):
-            kx[m], kv[m] = vs[m, i], a[m, i]
-        xn = lincomb(x[i], hh, b, kx, x.dtype)
-        v[i] = lincomb(v[i], hh, b, kv, x.dtype)
-        x[i] = xn
+        xn = lincomb(x[i], hh, coef, kx, x.dtype)
+        vn = lincomb(v[i], hh, coef, kv, x.dtype)
+        if ti.static(final):
+            x[i], v[i] = xn, vn
+        else:
+            yx[i], yv[i] = xn, vn
+            vs[j, i] = vn
 
 
 @ti.kernel
@@ -112,9 +103,9 @@ class FieldStepper:
                 _kick_drifts(x, v, a, n, h, slot, kick, tuple(drifts))
             return
         for j in range(1, len(self._rows)):
-            _rk_stage(x, v, a, self.vs, self.yx, self.yv, n, h, self._rows[j])
+            _rk_lincomb(x, v, a, self.vs, self.yx, self.yv, n, h, self._rows[j], False)
             self.accel(self.yx, self.yv, a, j)
-        _rk_combine(x, v, a, self.vs, n, h, self._b)
+        _rk_lincomb(x, v, a, self.vs, self.yx, self.yv, n, h, self._b, True)
 
 
 @ti.kernel

@@ -64,35 +64,34 @@ class Emitters:
         E = len(self.configs)
         self.count = E
         self.index = {c.name: e for e, c in enumerate(self.configs) if c.name}
-        f = lambda: ti.field(ti.f32, shape=E)  # noqa: E731
-        self.emitter_shape = ti.field(ti.i32, shape=E)
-        self.emitter_surface = ti.field(ti.i32, shape=E)
-        self.emitter_radius, self.emitter_cos_spread = f(), f()
-        self.emitter_speed_min, self.emitter_speed_max = f(), f()
-        self.emitter_inherit, self.emitter_life, self.emitter_life_rand = f(), f(), f()
-        self.emitter_drag = f()
-        self.emitter_box = ti.Vector.field(3, ti.f32, shape=E)
-        self.emitter_dir = ti.Vector.field(3, ti.f32, shape=E)
-        self.emitter_head = ti.field(ti.i32, shape=E)
-        self.emitter_serial = ti.field(ti.i32, shape=E)
-        self.emitter_emitted = ti.field(ti.i32, shape=E)
-        self.dropped = ti.field(ti.i32, shape=E)
-        self.clocks = []
-        for e, c in enumerate(self.configs):
-            self.emitter_shape[e] = SHAPES[c.shape]
-            self.emitter_surface[e] = int(c.surface)
-            self.emitter_radius[e] = c.radius
-            self.emitter_cos_spread[e] = math.cos(math.radians(c.spread))
-            self.emitter_speed_min[e], self.emitter_speed_max[e] = c.speed
-            self.emitter_inherit[e] = c.inherit_velocity
-            self.emitter_life[e] = c.lifetime
-            self.emitter_life_rand[e] = c.lifetime_randomness
-            self.emitter_drag[e] = -1.0 if c.drag is None else c.drag  # −1: use the scene's drag
-            self.emitter_box[e] = c.box_size
-            d = np.asarray(c.direction, np.float64)
-            self.emitter_dir[e] = (d / np.linalg.norm(d)).tolist()
-            bursts = sorted((b.time + j * b.interval, b.count) for b in c.bursts for j in range(b.cycles))
-            self.clocks.append(EmitterClock(c.start, math.inf if c.stop is None else c.stop, bursts))
+        cs = self.configs
+
+        def field(values, dtype=ti.f32):  # one parameter for every emitter, shape (E,) or (E, 3)
+            a = np.asarray(values, np.float32 if dtype == ti.f32 else np.int32).reshape(E, -1)
+            fld = ti.field(dtype, shape=E) if a.shape[1] == 1 else ti.Vector.field(a.shape[1], dtype, shape=E)
+            if E:
+                fld.from_numpy(a[:, 0] if a.shape[1] == 1 else a)
+            return fld
+
+        direction = np.array([c.direction for c in cs], np.float64).reshape(E, 3)
+        self.emitter_shape = field([SHAPES[c.shape] for c in cs], ti.i32)
+        self.emitter_surface = field([int(c.surface) for c in cs], ti.i32)
+        self.emitter_radius = field([c.radius for c in cs])
+        self.emitter_cos_spread = field([math.cos(math.radians(c.spread)) for c in cs])
+        self.emitter_speed_min = field([c.speed[0] for c in cs])
+        self.emitter_speed_max = field([c.speed[1] for c in cs])
+        self.emitter_inherit = field([c.inherit_velocity for c in cs])
+        self.emitter_life = field([c.lifetime for c in cs])
+        self.emitter_life_rand = field([c.lifetime_randomness for c in cs])
+        self.emitter_drag = field([-1.0 if c.drag is None else c.drag for c in cs])  # −1: the scene's drag
+        self.emitter_box = field([c.box_size for c in cs])
+        self.emitter_dir = field(direction / np.linalg.norm(direction, axis=1, keepdims=True))
+        # ring heads, serial numbers and counts: state the kernels and Python share
+        self.emitter_head, self.emitter_serial = field([0] * E, ti.i32), field([0] * E, ti.i32)
+        self.emitter_emitted, self.dropped = field([0] * E, ti.i32), field([0] * E, ti.i32)
+        self.clocks = [EmitterClock(c.start, math.inf if c.stop is None else c.stop,
+                                    sorted((b.time + j * b.interval, b.count) for b in c.bursts
+                                           for j in range(b.cycles))) for c in cs]
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
         self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
                        s.count, s.min_speed)
