@@ -20,7 +20,8 @@ class Decay:
         self.nan_after, self.event_at = nan_after, event_at
         self.calls = []
 
-    def fixed_step(self, t, h, n):
+    def fixed_step(self, t0, h, j, n):
+        t = t0 + j * h
         self.calls.append(("fixed", t, h))
         self.y *= 1 - h
         return 1

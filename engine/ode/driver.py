@@ -5,8 +5,10 @@ step and estimate its error, the driver decides which steps to take (scipy's ``O
 and diffrax's ``diffeqsolve`` split the work the same way). The protocol:
 
 * ``label`` (names the system in messages), ``method`` and ``order`` (the controller's exponent);
-* ``fixed_step(t, h, n) -> k``: fixed stepping, up to n steps of h from t (k ≥ 1 taken: one for a
-  system whose host work sits between steps, all n for one that loops inside a kernel);
+* ``fixed_step(t0, h, j, n) -> k``: fixed stepping, steps j, j+1, … (< n) of the n steps of h
+  from t0 (step m starts at t0 + m·h); returns how many it took, k ≥ 1: one where the system's
+  host work sits between steps, a run of them where nothing has to happen in between (a
+  particle run with no births due, solve's whole interval in one kernel);
 * ``attempt(t, h) -> err``: a trial step from the committed state at t, kept aside, returning the
   scaled max-norm error estimate (≤ 1 accepts; NaN or inf is a rejection);
 * ``commit(t, h)`` makes the trial the state; ``rollback()`` discards it;
@@ -23,7 +25,8 @@ landing exactly on the target; adaptive steps start from the policy's h (or the 
 resume after a clipped landing from the step the controller wanted before clipping, stay at most
 ``h_max``, count every attempt against ``max_steps`` per advance, and give up with
 :class:`SimulationDiverged` when a rejection would take h below ``h_min``. The stop check
-(``engine.runtime.check_stop``) runs once per call into the system.
+(``engine.runtime.check_stop``) runs once per call into the system: once per attempted step,
+once per fixed step or run of fixed steps.
 """
 from __future__ import annotations
 
@@ -129,9 +132,10 @@ class Driver:
         j = 0
         while j < n:
             check_stop()
-            j += self.system.fixed_step(t + j * h, h, n - j)
-        for _ in range(n):
-            self._record(h)
+            k = self.system.fixed_step(t, h, j, n)
+            for _ in range(k):
+                self._record(h)
+            j += k
 
     def _first_step(self, t: float, t_end: float) -> float:
         if self.h_next is not None:

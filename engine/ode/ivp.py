@@ -122,11 +122,12 @@ class _SmallSystem:
     def y(self) -> np.ndarray:
         return self.K.y[None].to_numpy().astype(np.float64)
 
-    def fixed_step(self, t, h, n):
-        done = self.K.run_fixed(t, h, n)
-        if done < n and self._bad is None:
+    def fixed_step(self, t0, h, j, n):
+        t = t0 + j * h
+        done = self.K.run_fixed(t, h, n - j)
+        if done < n - j and self._bad is None:
             self._bad = t + (done + 1) * h
-        return n
+        return n - j
 
     def attempt(self, t, h):
         return float(self.K.attempt(t, h, self.atol, self.rtol))

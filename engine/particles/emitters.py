@@ -106,9 +106,9 @@ class Emitters:
     def position_at(self, e: int, t: float) -> np.ndarray:
         return self.inputs[e].position_at(t)
 
-    def emit(self, t0: float, h: float) -> None:
-        """Write everything due in [t0, t0 + h) before the step [t0, t0 + h) is taken: one launch
-        for all emitters (none when nothing is due)."""
+    def plan(self, t0: float, h: float):
+        """Schedule everything due in [t0, t0 + h) (the clocks move on): the spawn launch's plan,
+        or None when nothing is due."""
         t1 = t0 + h
         rows, vals, adv, first = [], [], np.zeros((self.count, 4), np.int32), 0
         for e, clock in enumerate(self.clocks):
@@ -132,11 +132,21 @@ class Emitters:
                 a[_k.A_HEAD] += k
                 a[_k.A_SERIAL] += k
         if not adv[:, _k.A_SIZE].any():
-            return
+            return None
         nrows = len(rows)
         rows = np.array(rows or [(0,) * 7], np.int32)  # (a dummy row when only drops are due)
         vals = np.array(vals or [(0.0,) * 13], np.float32)
-        _k.spawn(self, self.state, rows, vals, nrows, first, adv)
+        return rows, vals, nrows, first, adv
+
+    def spawn(self, plan) -> None:
+        """Write a :meth:`plan`'s particles: one launch for all emitters (none for no plan)."""
+        if plan is not None:
+            rows, vals, nrows, first, adv = plan
+            _k.spawn(self, self.state, rows, vals, nrows, first, adv)
+
+    def emit(self, t0: float, h: float) -> None:
+        """Write everything due in [t0, t0 + h) before the step [t0, t0 + h) is taken."""
+        self.spawn(self.plan(t0, h))
 
     def emit_children(self) -> None:
         """Run every sub-emitter link on the events of the step just taken (the next step clears

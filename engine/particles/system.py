@@ -23,6 +23,7 @@ from .integrate import NO_FAILURE, ParticleIntegrator
 from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout
 
 H_MAX_FACTOR = 64  # an adaptive step may grow to 64 × the configured h
+MAX_RUN = 32  # fixed steps fused into one launch at most (a stop request waits for at most this many)
 
 
 class ParticleSystem:
@@ -50,6 +51,7 @@ class ParticleSystem:
             max_steps=sol.max_steps_per_frame,
             max_steps_hint="raise solver.tolerance or solver.max_steps_per_frame"), stats)
         self._alive = None  # (time, count): the live count, read back lazily once per time
+        self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
 
     def advance(self, t: float, dt: float) -> None:
         """Advance from t by dt seconds (any length), landing exactly on t + dt. Contacts recorded
@@ -66,12 +68,32 @@ class ParticleSystem:
         if self.colliders.count and self.control.colliders_move:
             self.colliders.move_to(t + h, self.control.collider_positions(t + h))
 
-    def fixed_step(self, t: float, h: float, n: int) -> int:
-        self._before(t, h)
+    def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
+        """Step j of h from t0 (step m starts at t0 + m·h); then, while nothing has to happen
+        between steps — no births due, colliders still, no sub-emitters — the following steps in
+        the same launch (at most MAX_RUN). Births due at the step a run stops before are held for
+        the next call, so the emitters' clocks advance exactly as step by step."""
+        t = t0 + j * h
+        held, self._held = self._held, None
+        self.emitters.spawn(held[1] if held is not None and held[0] == (t0, h, j) else self.emitters.plan(t, h))
+        moving = self.colliders.count and self.control.colliders_move
+        if moving:
+            self.colliders.move_to(t + h, self.control.collider_positions(t + h))
+        k = 1
+        if not moving and not self.emitters.uses_events:
+            while j + k < min(n, j + MAX_RUN):
+                due = self.emitters.plan(t0 + (j + k) * h, h)
+                if due is not None:
+                    self._held = ((t0, h, j + k), due)
+                    break
+                k += 1
         if self.layout.capacity:
-            integrate.step_fixed(self.integrator, t, h)
+            if k == 1:
+                integrate.step_fixed(self.integrator, t, h)
+            else:
+                integrate.step_fixed_run(self.integrator, t0, h, j, k)
         self.emitters.emit_children()
-        return 1
+        return k
 
     def attempt(self, t: float, h: float) -> float:
         self._before(t, h)

@@ -145,7 +145,8 @@ class SpringSystem:
             self.colliders.move_to(t_end, self.control.collider_positions(t_end))
         constraints.finalize(self.model, self.state, self._collide, self._bad, self._alpha(t_end), t_end)
 
-    def fixed_step(self, t: float, h: float, n: int) -> int:
+    def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
+        t = t0 + j * h
         self._drive_pins(h, t + h)
         self.stepper.step(h)
         self._post(t + h)
