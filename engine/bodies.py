@@ -94,5 +94,9 @@ class Body:
         self.system.apply(self.control.take_pins(self.index))
         self.system.step(dt)
 
+    def use_control(self, control) -> None:
+        """Take inputs from ``control`` (the scene's rebuilt one, sharing the gravity field)."""
+        self.control = self.system.control = control
+
     def positions(self) -> np.ndarray:
         return self.system.positions()

@@ -81,7 +81,7 @@ class Scene:
             for k, b in enumerate(cfg.bodies):
                 old = keep.get(b.name) if b.name else None
                 if old is not None and old.cfg == b and old.index == k:  # kept, compiled kernels and all
-                    old.control = old.system.control = self.control
+                    old.use_control(self.control)
                     self.bodies.append(old)
                 else:
                     self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k))
@@ -124,7 +124,7 @@ class Scene:
 
     def live_count(self) -> int:
         """Live particle slots now (one read-back, cached until the next advance)."""
-        return self.particles.count_alive(self.t) if self.particles is not None else 0
+        return self.particles.count_alive() if self.particles is not None else 0
 
     def render(self, width=None, height=None, camera=None, show_colliders=None) -> np.ndarray:
         """(H, W, 3) uint8 sRGB image of the current state."""

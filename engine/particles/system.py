@@ -50,7 +50,7 @@ class ParticleSystem:
             h=sol.h, adaptive=self.adaptive, rtol=sol.tolerance, atol=atol, h_max=H_MAX_FACTOR * sol.h,
             max_steps=sol.max_steps_per_frame,
             max_steps_hint="raise solver.tolerance or solver.max_steps_per_frame"), stats)
-        self._alive = None  # (time, count): the live count, read back lazily once per time
+        self._alive = None  # the live count, read back when first asked after an advance
         self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
 
     def advance(self, t: float, dt: float) -> None:
@@ -63,10 +63,12 @@ class ParticleSystem:
         self.driver.advance(t, t + dt)
 
     # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
-    def _before(self, t: float, h: float) -> None:
-        self.emitters.emit(t, h)  # newborns wait (negative age) if an attempt is retried shorter
-        if self.colliders.count and self.control.colliders_move:
-            self.colliders.move_to(t + h, self.control.collider_positions(t + h))
+    def _move_colliders(self, t_end: float) -> bool:
+        """Put moving colliders where the control says they are at t_end; whether any moves."""
+        moving = bool(self.colliders.count) and self.control.colliders_move
+        if moving:
+            self.colliders.move_to(t_end, self.control.collider_positions(t_end))
+        return moving
 
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
         """Step j of h from t0 (step m starts at t0 + m·h); then, while nothing has to happen
@@ -76,11 +78,8 @@ class ParticleSystem:
         t = t0 + j * h
         held, self._held = self._held, None
         self.emitters.spawn(held[1] if held is not None and held[0] == (t0, h, j) else self.emitters.plan(t, h))
-        moving = self.colliders.count and self.control.colliders_move
-        if moving:
-            self.colliders.move_to(t + h, self.control.collider_positions(t + h))
         k = 1
-        if not moving and not self.emitters.uses_events:
+        if not self._move_colliders(t + h) and not self.emitters.uses_events:
             while j + k < min(n, j + MAX_RUN):
                 due = self.emitters.plan(t0 + (j + k) * h, h)
                 if due is not None:
@@ -96,7 +95,8 @@ class ParticleSystem:
         return k
 
     def attempt(self, t: float, h: float) -> float:
-        self._before(t, h)
+        self.emitters.emit(t, h)  # newborns wait (negative age) if the attempt is retried shorter
+        self._move_colliders(t + h)
         if not self.layout.capacity:
             return 0.0
         return float(integrate.attempt(self.integrator, t, h, self.atol, self.rtol))
@@ -118,11 +118,11 @@ class ParticleSystem:
         return bad
 
     # -- read-back ----------------------------------------------------------------------------------
-    def count_alive(self, t=None) -> int:
-        """Live slots (particles not yet born this step included); one read-back per time."""
-        if self._alive is None or self._alive[0] != t:
-            self._alive = (t, int(integrate.count_alive(self.state.particle_alive, self.layout.capacity)))
-        return self._alive[1]
+    def count_alive(self) -> int:
+        """Live slots (particles not yet born this step included): one read-back per advance."""
+        if self._alive is None:
+            self._alive = int(integrate.count_alive(self.state.particle_alive, self.layout.capacity))
+        return self._alive
 
     def dropped(self) -> int:
         return int(self.emitters.dropped_counts().sum())

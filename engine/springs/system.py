@@ -26,7 +26,7 @@ from ..ode.staged import FieldStepper, StagedDoubling
 from ..runtime import ensure_init
 from . import constraints
 from .energy import network_energy
-from .forces import accel_launcher
+from .forces import ACCUMULATORS, accel_launcher
 from .limits import DistanceLimits
 from .model import SpringModel, SpringState
 from .stability import SAFETY, StiffnessError, auto_substeps, check_step, network_bounds, stable_step
@@ -49,6 +49,8 @@ class SpringSystem:
         ensure_init()
         if integrator not in INTEGRATORS:
             raise ValueError(f"integrator: unknown value {integrator!r}; allowed: {', '.join(INTEGRATORS)}")
+        if accumulate not in ACCUMULATORS:
+            raise ValueError(f"accumulate: unknown value {accumulate!r}; allowed: {', '.join(ACCUMULATORS)}")
         if not (substeps is None or substeps == "auto" or (isinstance(substeps, int) and substeps >= 1)):
             raise ValueError(f"substeps: expected None, a positive int or 'auto'; got {substeps!r}")
         if adaptive and integrator == "xpbd":
