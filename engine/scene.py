@@ -21,7 +21,8 @@ from .ode.driver import DriverStats, SimulationDiverged
 from .particles.system import ParticleSystem
 from .render.camera import Camera
 
-__all__ = ["Scene", "SimulationDiverged", "Stats", "collider_specs"]
+DivergenceError = SimulationDiverged  # the name the command line catches (exit 3): the same class
+__all__ = ["Scene", "SimulationDiverged", "DivergenceError", "Stats", "collider_specs"]
 
 
 @dataclass

@@ -114,8 +114,7 @@ def _open_output(cfg, args, out_dir) -> int:
 
 def cmd_run(args) -> int:
     from ..render.output import FrameWriter, OutputError
-    from ..ode import SimulationDiverged
-    from ..scene import Scene
+    from ..scene import DivergenceError, Scene
     from .signals import StopRequest
 
     cfg = load_scene_config(args.config, args)
@@ -137,7 +136,7 @@ def cmd_run(args) -> int:
                 if k >= first:  # --resume: frames before `first` are on disk already
                     writer.submit(k, scene.render())
                 progress.update(k + 1, scene.stats.alive)
-        except SimulationDiverged as e:
+        except DivergenceError as e:
             failure = e
         except OutputError as e:
             out_failure = e
