@@ -58,3 +58,44 @@ def test_fixed_step_cloths_kept():
     assert sorted(got) == sorted(want)
     for method in want:
         np.testing.assert_allclose(got[method], want[method], err_msg=method, **TOL)
+
+
+PROBE = """
+import hashlib, sys
+sys.path[:0] = [".", "tests"]  # this checkout, run from its root
+from engine import runtime
+runtime.init("cpu", threads=int(sys.argv[1]))
+from engine.config import load_config
+from engine.scene import Scene
+from engine.particles.emitters import CHUNK_MIN
+from behaviour_scenes import SUB_EMITTERS
+d = dict(SUB_EMITTERS)
+d["emitters"] = [dict(e) for e in d["emitters"]]
+d["emitters"][0].update(rate=3000.0, capacity=4 * CHUNK_MIN)  # a parent ring of 4 slices
+s = Scene(load_config(d), render=False)
+for _ in range(30):
+    s.advance_frame()
+S = s.particles.state
+h = hashlib.sha256()
+for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive", "particle_emitter"):
+    h.update(getattr(S, f).to_numpy().tobytes())
+print(h.hexdigest(), *s.particles.emitters.emitted_counts())
+"""
+
+
+def test_sub_emitters_give_the_same_bytes_with_one_and_two_threads(tmp_path):
+    """Children take slots from a chunked prefix sum over the parents (several slices here):
+    the pool is byte-identical for any thread count."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "probe.py"
+    script.write_text(PROBE)
+    root = os.path.dirname(os.path.dirname(HERE))  # the checkout (HERE is tests/behaviour)
+    runs = [subprocess.run([sys.executable, str(script), str(n)], cwd=root, capture_output=True, text=True)
+            for n in (1, 2)]
+    assert all(r.returncode == 0 for r in runs), [r.stderr[-1500:] for r in runs]
+    out = [r.stdout.split() for r in runs]
+    assert out[0] == out[1], out
+    emitted = [int(v) for v in out[0][1:]]
+    assert emitted[0] > 1000 and emitted[1] > 1000 and emitted[2] > 0, emitted  # parents, children, grandchildren
