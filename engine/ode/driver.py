@@ -31,7 +31,7 @@ once per fixed step or run of fixed steps.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 from ..runtime import check_stop
