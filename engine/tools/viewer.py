@@ -109,7 +109,7 @@ def run_viewer(make_scene, title: str, frames: int | None = None, screenshot: st
         img = scene.render(W, H, show_colliders=show_colliders)[..., :3]
         gui.set_image(to_gui(img))
         fps = 0.9 * fps + 0.1 / max(dt, 1e-6) if shown else 1.0 / max(dt, 1e-6)
-        gui.text(f"{fps:5.1f} fps   {scene.scene.stats.alive:,} particles   t={scene.time:5.2f} s"
+        gui.text(f"{fps:5.1f} fps   {scene.live_count():,} particles   t={scene.time:5.2f} s"
                  f"{'   [paused]' if paused else ''}", pos=(0.01, 0.99), color=0xFFFFFF, font_size=16)
         shown += 1
         last = frames is not None and shown >= frames

@@ -103,7 +103,7 @@ def run(quick: bool = False):
     t_splat_s = time_median(lambda: R._splat(*args), max(2, repeats // 2), warmup=0)
     t_res = time_median(lambda: R._resolve(R.cfg.exposure), repeats, warmup=0)
     t_read = time_median(lambda: R.image.to_numpy(), repeats, warmup=0)
-    live = int(scene.particles.count_alive())
+    live = scene.live_count()
     label = f"{n / 1e6:g}M" if n >= 1_000_000 else f"{n // 1000}k"
     sec = f"full frame, {label} live particles at {w}x{h}"
     rows = [
