@@ -10,10 +10,10 @@
         for hit in scene.contacts(min_speed=2.0).rows(): play_sound(hit)
         image = scene.render(320, 180)               # (H, W, 4) uint8 RGBA to blit
 
-Everything here is Control (this frame's inputs) or read-back; fields and kernels were built by
-:class:`~engine.scene.Scene`. Adding or removing emitters, colliders or bodies rebuilds the scene
-between frames (kernels are compiled for a fixed set of features) and carries live particles,
-emitter clocks and soft bodies over by name.
+Everything here writes the scene's :class:`~engine.control.Control` (this frame's inputs) or reads
+back; fields and kernels were built by :class:`~engine.scene.Scene`. Adding or removing emitters,
+colliders or bodies rebuilds the scene between frames (kernels are compiled for a fixed set of
+features) and carries live particles, emitter clocks, inputs and soft bodies over by name.
 """
 from __future__ import annotations
 
@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import load_config
-from .particles.pool import PARTICLE_FIELDS
 from .render.camera import Camera
 from .scene import Scene
 
@@ -114,13 +113,12 @@ class ParticleScene:
         """Advance by dt seconds (any length), sub-stepping with the configured integrator."""
         if not dt > 0:
             raise ValueError(f"dt: must be positive, got {dt}")
-        p = self.scene.particles
-        if p is not None and self._contacts:
-            p.integrator.contact_count[None] = 0
         self.scene.advance(dt)
-        if p is not None:
-            self.scene.stats.alive = p.count_alive()
         self._last_contacts = None
+
+    def live_count(self) -> int:
+        """Live particles now (one read-back per step, only when asked)."""
+        return self.scene.live_count()
 
     # -- control ----------------------------------------------------------------------------------
     def _emitter(self, name) -> int:
@@ -132,51 +130,40 @@ class ParticleScene:
     def move_emitter(self, name: str, position, over: float | None = None) -> None:
         """Move emitter ``name`` to ``position`` by the end of the next step of length ``over``
         (default: one frame at the config's fps); its velocity is inferred from the motion."""
-        em = self.scene.particles.emitters
-        dt = over or self.scene.frame_dt
-        em.set_target(self._emitter(name), self.time, self.time + dt, position)
+        e = self._emitter(name)
+        self.scene.control.move_emitter(e, self.time, self.time + (over or self.scene.frame_dt), position)
 
     def set_rate(self, name: str, rate: float) -> None:
         """Particles per second (the pool keeps its size: beyond it particles are counted dropped)."""
         if not rate >= 0:
             raise ValueError(f"rate: must be >= 0, got {rate}")
-        self.scene.particles.emitters.clocks[self._emitter(name)].rate = float(rate)
+        self.scene.control.set_rate(self._emitter(name), rate)
 
     def set_emitting(self, name: str, on: bool) -> None:
         """Start or stop an emitter's continuous emission (bursts from code still work)."""
-        self.scene.particles.emitters.clocks[self._emitter(name)].enabled = bool(on)
+        self.scene.control.set_emitting(self._emitter(name), on)
 
     def burst(self, name: str, count: int, position=None) -> None:
         """Emit ``count`` particles from ``name`` at the start of the next step; with ``position``
         the emitter is first placed there (a jump, not a motion: nothing is inherited)."""
-        em, e = self.scene.particles.emitters, self._emitter(name)
+        e, ctl = self._emitter(name), self.scene.control
         if position is not None:
-            em.runtime_paths[e] = [(self.time, tuple(float(c) for c in position))]
-        em.burst(e, int(count))
+            ctl.place_emitter(e, self.time, position)
+        ctl.burst(e, count)
 
     def move_collider(self, name: str, position, over: float | None = None) -> None:
         """Move collider ``name`` (a plane's point or a sphere's centre) to ``position`` by the end
         of the next step; its velocity is inferred, so it pushes particles and soft bodies."""
-        dt = over or self.scene.frame_dt
         k = self.scene.colliders.index(name)
-        self.scene.colliders.set_target(k, self.time, self.time + dt, position)
-        if self.scene.particles is not None:
-            self.scene.particles.moving_colliders = True
-        for body in self.scene.bodies:
-            if body.colliders is not None:
-                body.colliders.set_target(k, self.time, self.time + dt, position)
-                body.system.move_colliders = True
+        self.scene.control.move_collider(k, self.time, self.time + (over or self.scene.frame_dt), position)
 
     def set_wind(self, wind) -> None:
         """Air velocity (m/s) seen by drag."""
-        self.scene.particles.forces.force_wind[None] = [float(c) for c in wind]
+        self.scene.control.set_wind(wind)
 
     def set_gravity(self, g) -> None:
-        p = self.scene.particles
-        if p is not None:
-            p.forces.force_gravity[None] = [float(c) for c in g]
-        for body in self.scene.bodies:
-            body.system.model.gravity[None] = [float(c) for c in g]
+        """Gravity (m/s²) for particles and soft bodies."""
+        self.scene.control.set_gravity(g)
 
     def _body(self, name):
         for b in self.scene.bodies:
@@ -185,35 +172,23 @@ class ParticleScene:
         raise KeyError(f"body: no body named {name!r} (names: {[b.cfg.name for b in self.scene.bodies]})")
 
     def pin(self, body: str, node: int, target=None) -> None:
-        """Hold a node of a soft body at ``target`` (default: where it is)."""
-        self._body(body).system.pin(int(node), target)
+        """Hold a node of a soft body at ``target`` (default: where it is), from the next step."""
+        self.scene.control.pin(self._body(body).index, node, target)
 
     def move_pin(self, body: str, node: int, target) -> None:
         """Drag a pinned node to ``target`` over the next step (a hand holding the cloth)."""
-        self._body(body).system.set_pin_target(int(node), target)
+        self.scene.control.move_pin(self._body(body).index, node, target)
 
     def release(self, body: str, node: int) -> None:
-        self._body(body).system.release(int(node))
+        self.scene.control.release(self._body(body).index, node)
 
     # -- read-back --------------------------------------------------------------------------------
     def particles(self) -> dict:
         """Live particles as NumPy arrays (copies; Taichi fields are not shared memory on every
         backend): ``position`` (N, 3), ``velocity`` (N, 3), ``age`` (N,), ``life`` (N,),
         ``emitter`` (N,) index, ``color`` (N, 3) linear RGB from the emitter's ramp."""
-        p = self.scene.particles
-        if p is None:
-            z = np.zeros((0, 3), np.float32)
-            return dict(position=z, velocity=z, age=np.zeros(0), life=np.zeros(0),
-                        emitter=np.zeros(0, np.int32), color=z)
-        S, cap = p.state, p.layout.capacity
-        alive = S.particle_alive.to_numpy()[:cap] != 0
-        age = S.particle_age.to_numpy()[:cap]
-        m = alive & (age >= 0)
-        life = S.particle_life.to_numpy()[:cap][m]
-        emitter = S.particle_emitter.to_numpy()[:cap][m]
-        out = dict(position=S.particle_pos.to_numpy()[:cap][m], velocity=S.particle_vel.to_numpy()[:cap][m],
-                   age=age[m], life=life, emitter=emitter)
-        out["color"] = self._colors(emitter, np.clip(age[m] / life, 0, 1))
+        out = self.scene.live_particles()
+        out["color"] = self._colors(out["emitter"], np.clip(out["age"] / out["life"], 0, 1))
         return out
 
     def _colors(self, emitter, t):
@@ -235,21 +210,17 @@ class ParticleScene:
 
     def contacts(self, min_speed: float = 0.0) -> Contacts:
         """Contacts of the last ``step`` with impact speed >= ``min_speed`` (needs contacts=True)."""
-        p = self.scene.particles
         if not self._contacts:
             raise RuntimeError("contacts: build the scene with contacts=True to record them")
         if self._last_contacts is None:
-            I = p.integrator
-            n = int(I.contact_count[None])
-            k = min(n, I.max_contacts)
-            slot = I.contact_slot.to_numpy()[:k]
-            tt = I.contact_time.to_numpy()[:k]
-            order = np.lexsort((slot, tt))  # deterministic, whatever order threads wrote them in
-            self._last_contacts = Contacts(I.contact_collider.to_numpy()[:k][order],
-                                           I.contact_pos.to_numpy()[:k][order],
-                                           I.contact_normal.to_numpy()[:k][order],
-                                           I.contact_speed.to_numpy()[:k][order], tt[order],
-                                           dropped=max(0, n - k))
+            p = self.scene.particles
+            if p is None:
+                empty = np.zeros(0)
+                self._last_contacts = Contacts(empty.astype(np.int32), np.zeros((0, 3)), np.zeros((0, 3)),
+                                               empty, empty)
+            else:
+                (collider, pos, normal, speed, time, _slot), dropped = p.contacts()
+                self._last_contacts = Contacts(collider, pos, normal, speed, time, dropped=dropped)
         c = self._last_contacts
         m = c.speed >= min_speed
         return Contacts(c.collider[m], c.position[m], c.normal[m], c.speed[m], c.time[m], c.dropped)
@@ -271,16 +242,9 @@ class ParticleScene:
         return self._data if self._data is not None else self.cfg.model_dump(exclude_none=True)
 
     def _rebuild(self, data: dict) -> None:
-        old = self.scene
         new_cfg = load_config(data)
-        keep = {b.cfg.name: b for b in old.bodies if b.cfg.name}
-        bodies = [keep.get(b.name) if b.name and keep.get(b.name) is not None
-                  and keep[b.name].cfg == b else None for b in new_cfg.bodies]
-        scene = Scene(new_cfg, render=self._render, contacts=self._contacts, bodies=bodies)
-        scene.t, scene.frame, scene.stats = old.t, old.frame, old.stats
-        if old.particles is not None and scene.particles is not None:
-            _carry_particles(old.particles, scene.particles)
-        self.scene, self.cfg, self._data = scene, new_cfg, data
+        self.scene = Scene(new_cfg, render=self._render, contacts=self._contacts, previous=self.scene)
+        self.cfg, self._data = new_cfg, data
 
     def _add(self, key: str, item: dict) -> None:
         data = self._data_now()
@@ -312,29 +276,6 @@ class ParticleScene:
     def remove_body(self, name: str) -> None:
         self._body(name)
         self._remove("bodies", name)
-
-
-def _carry_particles(old, new) -> None:
-    """Copy each named emitter's ring (particles, head, serial, clock) into the rebuilt pool."""
-    fields = PARTICLE_FIELDS
-    src = {f: getattr(old.state, f).to_numpy() for f in fields}
-    dst = {f: getattr(new.state, f).to_numpy() for f in fields}
-    old_names = [c.name for c in old.emitters.configs]
-    for e_new, c in enumerate(new.emitters.configs):
-        if not c.name or c.name not in old_names:
-            continue
-        e_old = old_names.index(c.name)
-        a, n_old = old.layout.starts[e_old], old.layout.sizes[e_old]
-        b, n_new = new.layout.starts[e_new], new.layout.sizes[e_new]
-        n = min(n_old, n_new)
-        for f in fields:
-            dst[f][b:b + n] = src[f][a:a + n]
-        dst["particle_emitter"][b:b + n] = e_new
-        new.emitters.clocks[e_new] = copy.copy(old.emitters.clocks[e_old])
-        new.emitters.emitter_head[e_new] = int(old.emitters.emitter_head[e_old]) % n_new
-        new.emitters.emitter_serial[e_new] = int(old.emitters.emitter_serial[e_old])
-    for f in fields:
-        getattr(new.state, f).from_numpy(dst[f])
 
 
 class SceneBuilder:

@@ -35,24 +35,28 @@ def build_topology(b):
     return jelly(*b.resolution, size=b.size, origin=b.position, pinned=pinned, **kw)
 
 
-def _thicken(spec, d):
-    s = dataclasses.replace(spec)
-    if s.kind == "sphere":
-        s.radius = spec.radius + d
-    else:
-        n = np.asarray(spec.normal, np.float64)
-        shift = d * n / np.linalg.norm(n)
-        s.point = tuple(np.asarray(spec.point, np.float64) + shift)
-        s.path = [(t, tuple(np.asarray(p, np.float64) + shift)) for t, p in spec.path]
-    return s
+def _thickened(specs, d):
+    """The scene's colliders for a body keeping distance d from them: spheres grow by d, planes
+    move by d along their normal (a shift added to the position the control gives)."""
+    out, shift = [], np.zeros((len(specs), 3))
+    for k, spec in enumerate(specs):
+        s = dataclasses.replace(spec)
+        if s.kind == "sphere":
+            s.radius = spec.radius + d
+        else:
+            n = np.asarray(spec.normal, np.float64)
+            shift[k] = d * n / np.linalg.norm(n)
+        out.append(s)
+    return Colliders(out, shift)
 
 
 class Body:
-    """One soft body of a scene: its spring system, its own colliders (same specs as the scene's:
-    a moving collider infers its velocity from its own updates) and what the renderer draws."""
+    """One soft body of a scene: its spring system, its own colliders (the scene's, thickened,
+    at the positions the scene's control gives: a moving collider infers its velocity from its
+    own updates) and what the renderer draws."""
 
-    def __init__(self, cfg, collider_specs, gravity, default_integrator):
-        self.cfg = cfg
+    def __init__(self, cfg, collider_specs, control, default_integrator, index: int = 0):
+        self.cfg, self.index = cfg, index
         self.topology = build_topology(cfg)
         n = self.topology.node_count
         bad = [p for p in (cfg.pins if isinstance(cfg.pins, list) else []) if p >= n]
@@ -60,12 +64,13 @@ class Body:
             raise ValueError(f"pins: node {bad[0]} does not exist (the body has {n} nodes)")
         # nodes keep `thickness` from every surface: flat triangles between nodes resting on a
         # sphere would otherwise cut into it (a chord lies inside the circle)
-        self.colliders = Colliders([_thicken(s, cfg.thickness) for s in collider_specs]) \
-            if collider_specs else None
+        self.colliders = _thickened(collider_specs, cfg.thickness) if collider_specs else None
         integrator = cfg.integrator or default_integrator
-        self.system = SpringSystem(self.topology, colliders=self.colliders, gravity=tuple(gravity),
+        self.system = SpringSystem(self.topology, colliders=self.colliders, control=control,
                                    integrator=integrator, substeps=cfg.substeps,
-                                   xpbd_iterations=cfg.iterations, max_stretch=cfg.max_stretch)
+                                   xpbd_iterations=cfg.iterations, max_stretch=cfg.max_stretch,
+                                   name=f"bodies[{index}] ({cfg.type})")
+        self.control = control
         self.pinned = np.array(self.topology.pinned, np.int64)
         self.pin_home = self.topology.positions[self.pinned].copy() if len(self.pinned) else None
         self.released = False
@@ -74,7 +79,8 @@ class Body:
                       else np.zeros((0, 2), np.int32))
 
     def step(self, t0: float, dt: float) -> None:
-        """Advance from t0 by dt: pins follow their path, let go at ``release_at``."""
+        """Advance from t0 by dt: pins follow their path, let go at ``release_at``, then take the
+        control's pin requests (pin, move, release from code)."""
         c = self.cfg
         if c.release_at is not None and not self.released and t0 + dt > c.release_at:
             for node in self.pinned:
@@ -85,7 +91,12 @@ class Body:
                 - np.asarray(c.pin_path[0].position, np.float64)
             for node, home in zip(self.pinned, self.pin_home):
                 self.system.set_pin_target(int(node), home + offset)
+        self.system.apply(self.control.take_pins(self.index))
         self.system.step(dt)
+
+    def use_control(self, control) -> None:
+        """Take inputs from ``control`` (the scene's rebuilt one, sharing the gravity field)."""
+        self.control = self.system.control = control
 
     def positions(self) -> np.ndarray:
         return self.system.positions()

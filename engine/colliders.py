@@ -8,7 +8,8 @@ surface. Energy (in the collider's frame) never grows for e ≤ 1.
 
 The set of colliders is fixed when a scene is finalised: their count is a compile-time constant
 and the per-collider loop is unrolled with ``ti.static``, so a scene with no colliders compiles no
-collision code. Their transforms live in fields (Control): moving one costs no recompilation.
+collision code. Their positions live in fields, set from the scene's Control
+(engine.control) before each step: moving one costs no recompilation.
 """
 from __future__ import annotations
 
@@ -49,9 +50,11 @@ class Colliders:
     Fields (shape (count,)): ``collider_point`` (plane point or sphere centre, m),
     ``collider_normal`` (unit, planes), ``collider_radius`` (m), ``collider_vel`` (m/s, inferred
     from motion between updates), ``collider_restitution``, ``collider_friction``.
+    ``shift`` (count, 3): an offset added to every position (a soft body keeps its thickness from
+    a plane by a copy of it moved along the normal).
     """
 
-    def __init__(self, specs: Sequence[ColliderSpec]):
+    def __init__(self, specs: Sequence[ColliderSpec], shift=None):
         self.specs = list(specs)
         self.count = len(self.specs)
         self.kinds = tuple(PLANE if s.kind == "plane" else SPHERE for s in self.specs)
@@ -64,23 +67,25 @@ class Colliders:
         self.collider_restitution = ti.field(ti.f32, shape=n)
         self.collider_friction = ti.field(ti.f32, shape=n)
         self._pos = np.zeros((n, 3), np.float32)
+        self.shift = np.zeros((self.count, 3)) if shift is None else np.asarray(shift, np.float64).reshape(-1, 3)
         for k, s in enumerate(self.specs):
             nrm = np.asarray(s.normal, np.float64)
             self.collider_normal[k] = (nrm / np.linalg.norm(nrm)).tolist()
             self.collider_radius[k] = float(s.radius)
             self.collider_restitution[k] = float(s.restitution)
             self.collider_friction[k] = float(s.friction)
-            self._pos[k] = s.position_at(0.0)
+            self._pos[k] = s.position_at(0.0) + self.shift[k]
         self.collider_point.from_numpy(self._pos)
         self._t = 0.0
 
     def move_to(self, t: float, positions=None) -> None:
-        """Set the colliders' positions for time t (from their paths unless ``positions`` given)
-        and infer their velocities from the motion since the last call."""
+        """Set the colliders' positions for time t (``positions`` (count, 3), else from their
+        specs' paths) and infer their velocities from the motion since the last call."""
         if self.count == 0:
             return
-        new = np.array([s.position_at(t) for s in self.specs] if positions is None else positions,
-                       np.float32).reshape(self.count, 3)
+        pos = np.array([s.position_at(t) for s in self.specs] if positions is None else positions,
+                       np.float64).reshape(self.count, 3)
+        new = (pos + self.shift).astype(np.float32) if self.shift.any() else pos.astype(np.float32)
         dt = t - self._t
         vel = (new - self._pos[: self.count]) / dt if dt > 0 else np.zeros_like(new)
         self._pos[: self.count] = new
@@ -101,13 +106,6 @@ class Colliders:
                 return k
         raise KeyError(f"collider: no collider named {name!r} "
                        f"(names: {', '.join(repr(s.name) for s in self.specs if s.name) or 'none'})")
-
-    def set_target(self, k: int, t_now: float, t_next: float, position) -> None:
-        """Control: collider k moves linearly to ``position`` by ``t_next`` (its velocity is
-        inferred from the motion, so it pushes what it hits)."""
-        s = self.specs[k]
-        s.path = [(t_now, tuple(float(c) for c in s.position_at(t_now))),
-                  (max(t_next, t_now + 1e-9), tuple(float(c) for c in position))]
 
     def make_func(self, report: bool = False):
         """``collide(x, v) -> (x', v', killed, hits)`` for one point; the per-collider loop is

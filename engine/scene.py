@@ -2,34 +2,37 @@
 by frame, rendered off-screen.
 
 Model (fixed: pool layout, emitter, body and collider parameters), State (particle and node
-fields, emitter clocks) and Control (this step's emitter and collider positions, gravity, wind)
-are kept apart. A part the config does not use is not built: a soft-body scene has no particle
-pool or splat kernel; a spark scene has no spring kernels.
+fields, emitter clocks) and Control (this frame's inputs: emitter and collider positions, rates,
+bursts, pins, gravity, wind — :class:`~engine.control.Control`, what the game API writes) are kept
+apart. A part the config does not use is not built: a soft-body scene has no particle pool or
+splat kernel; a spark scene has no spring kernels. A failure raises the ODE core's
+:class:`~engine.ode.driver.SimulationDiverged` (integrator, h and time in its message).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import runtime
 from .colliders import ColliderSpec, Colliders
-from .particles.system import DivergenceError, ParticleSystem
+from .control import Control
+from .ode.driver import DriverStats, SimulationDiverged
+from .particles.system import ParticleSystem
 from .render.camera import Camera
 
-__all__ = ["Scene", "DivergenceError", "Stats", "collider_specs"]
+DivergenceError = SimulationDiverged  # the name the command line catches (exit 3): the same class
+__all__ = ["Scene", "SimulationDiverged", "DivergenceError", "Stats", "collider_specs"]
 
 
 @dataclass
-class Stats:
-    steps: int = 0
-    rejected: int = 0
+class Stats(DriverStats):
+    """The particle driver's counts (steps, rejected, h range) and per-frame figures: ``alive``
+    (live particles after the last frame) and its peak."""
+
     frames: int = 0
     peak_alive: int = 0
     alive: int = 0
-    h_min: float = math.inf
-    h_max: float = 0.0
 
 
 def collider_specs(cfg_colliders):
@@ -48,10 +51,11 @@ class Scene:
     """Everything one config needs, built once. ``advance_frame()`` steps to the next frame time;
     ``render()`` draws the current state."""
 
-    def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, bodies=None):
-        """``contacts``: record up to this many particle–collider contacts per step batch (0: the
-        contact code is not compiled). ``bodies``: already-built Body objects to reuse by index
-        (a rebuilt scene keeps its soft bodies without recompiling them)."""
+    def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, previous=None):
+        """``contacts``: record up to this many particle–collider contacts per advance (0: the
+        contact code is not compiled). ``previous``: the scene this one replaces (a rebuild
+        between frames): its time, statistics, inputs and live particles carry over by name, and
+        its soft bodies whose config did not change are kept without recompiling them."""
         runtime.ensure_init()
         self.cfg = cfg
         self.t = 0.0
@@ -60,16 +64,28 @@ class Scene:
         self.stats = Stats()
         specs = collider_specs(cfg.colliders)
         self.colliders = Colliders(specs)
-        self.particles = (ParticleSystem(cfg, self.colliders, self.stats, contacts)
+        if previous is None:
+            self.control = Control.for_scene(cfg, specs)
+        else:
+            self.control = previous.control.rebuilt(cfg, specs)
+            self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
+        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts)
                           if cfg.emitters else None)
+        if previous is not None and previous.particles is not None and self.particles is not None:
+            self.particles.carry_from(previous.particles)
         self.bodies = []
         if cfg.bodies:
             from .bodies import Body
 
-            reuse = list(bodies or [])
+            same_colliders = previous is not None and previous.cfg.colliders == cfg.colliders
+            keep = {b.cfg.name: b for b in (previous.bodies if same_colliders else []) if b.cfg.name}
             for k, b in enumerate(cfg.bodies):
-                self.bodies.append(reuse[k] if k < len(reuse) and reuse[k] is not None
-                                   else Body(b, specs, cfg.forces.gravity, cfg.solver.integrator))
+                old = keep.get(b.name) if b.name else None
+                if old is not None and old.cfg == b and old.index == k:  # kept, compiled kernels and all
+                    old.use_control(self.control)
+                    self.bodies.append(old)
+                else:
+                    self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
@@ -86,25 +102,22 @@ class Scene:
         """Advance everything by dt seconds (any length), landing exactly on t + dt."""
         if self.particles is not None:
             self.particles.advance(self.t, dt)
-        for k, body in enumerate(self.bodies):
-            try:
-                body.step(self.t, dt)
-            except Exception as e:
-                from .springs import SimulationDiverged, StiffnessError
-
-                if isinstance(e, (SimulationDiverged, StiffnessError)):
-                    raise DivergenceError(f"bodies[{k}] ({body.cfg.type}): {e}") from None
-                raise
+        for body in self.bodies:
+            body.step(self.t, dt)
         self.t += dt
 
     def advance_frame(self) -> None:
+        """Step to the next frame time; the live count is read back once per frame."""
         self.advance((self.frame + 1) * self.frame_dt - self.t)
         self.frame += 1
         self.stats.frames += 1
-        if self.particles is not None:
-            alive = self.particles.count_alive()
-            self.stats.alive = alive
-            self.stats.peak_alive = max(self.stats.peak_alive, alive)
+        alive = self.live_count()
+        self.stats.alive = alive
+        self.stats.peak_alive = max(self.stats.peak_alive, alive)
+
+    def live_count(self) -> int:
+        """Live particle slots now (one read-back, cached until the next advance)."""
+        return self.particles.count_alive() if self.particles is not None else 0
 
     def render(self, width=None, height=None, camera=None, show_colliders=None, *, out=None,
                transparent=False, bgra=False) -> np.ndarray:
@@ -138,5 +151,20 @@ class Scene:
             return np.zeros((0, 3), np.float32)
         return self.particles.state.particle_vel.to_numpy()[: self.capacity][self.alive_mask()]
 
+    def live_particles(self) -> dict:
+        """Copies of the live (born) particles' ``position`` (N, 3), ``velocity`` (N, 3), ``age``,
+        ``life`` (N,) and ``emitter`` (N,) index, in pool order."""
+        if self.particles is None:
+            z = np.zeros((0, 3), np.float32)
+            return dict(position=z, velocity=z, age=np.zeros(0, np.float32), life=np.zeros(0, np.float32),
+                        emitter=np.zeros(0, np.int32))
+        S, cap = self.particles.state, self.capacity
+        age = S.particle_age.to_numpy()[:cap]
+        m = (S.particle_alive.to_numpy()[:cap] != 0) & (age >= 0)
+        return dict(position=S.particle_pos.to_numpy()[:cap][m], velocity=S.particle_vel.to_numpy()[:cap][m],
+                    age=age[m], life=S.particle_life.to_numpy()[:cap][m],
+                    emitter=S.particle_emitter.to_numpy()[:cap][m])
+
     def dropped(self) -> int:
         return self.particles.dropped() if self.particles else 0
+

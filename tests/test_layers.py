@@ -2,12 +2,18 @@
 
 Rules (README, "How the code is laid out"):
 - the core never imports the tools (``engine.tools``);
-- ``engine.ode`` imports nothing of particles, springs, scene, config, render or api;
-- the config package's import closure holds no Taichi (validating a file needs no compiler).
+- ``engine.ode`` imports nothing of particles, springs, scene, config, render, api, control,
+  colliders or bodies;
+- the config package's import closure holds no Taichi (validating a file needs no compiler);
+- only ``engine.ode`` reads method coefficients (tableaus, splittings, a method's ``scheme``,
+  stability polynomials): everyone else sees a method's name, order and cost;
+- only the driver (``engine.ode.driver``) calls the step-size controller.
 Each rule is also checked against a planted violation, so a checker that sees nothing fails.
 """
 import ast
 import os
+import subprocess
+import sys
 
 import pytest
 
@@ -21,6 +27,11 @@ def module_name(path):
 
 def is_package(path):
     return os.path.basename(path) == "__init__.py"
+
+
+def attributes_of(source):
+    """Every attribute name read or called in ``source`` (``x.scheme``, ``ctrl.propose(...)``)."""
+    return {node.attr for node in ast.walk(ast.parse(source)) if isinstance(node, ast.Attribute)}
 
 
 def imports_of(source, name, package):
@@ -42,20 +53,24 @@ def imports_of(source, name, package):
     return out
 
 
-def graph(extra=None):
-    """{module: imported module names} for every module of engine/ and effects/; ``extra`` adds
-    or replaces sources ({module name: (source, is_package)}) for planted violations."""
-    g = {}
+def sources(extra=None):
+    """{module: (source, is_package)} for every module of engine/ and effects/; ``extra`` adds or
+    replaces sources for planted violations."""
+    out = {}
     for top in ("engine", "effects"):
         for dp, _, files in os.walk(os.path.join(ROOT, top)):
             for f in files:
                 if f.endswith(".py"):
                     p = os.path.join(dp, f)
                     with open(p, encoding="utf-8") as fh:
-                        g[module_name(p)] = imports_of(fh.read(), module_name(p), is_package(p))
-    for name, (src, pkg) in (extra or {}).items():
-        g[name] = imports_of(src, name, pkg)
-    return g
+                        out[module_name(p)] = (fh.read(), is_package(p))
+    out.update(extra or {})
+    return out
+
+
+def graph(extra=None):
+    """{module: imported module names} (see :func:`sources` for ``extra``)."""
+    return {name: imports_of(src, name, pkg) for name, (src, pkg) in sources(extra).items()}
 
 
 def closure(g, start):
@@ -77,7 +92,21 @@ def in_pkg(mod, pkg):
     return mod == pkg or mod.startswith(pkg + ".")
 
 
-def violations(g):
+COEFFICIENT_MODULES = ("engine.ode.tableau", "engine.ode.splitting")
+COEFFICIENT_NAMES = {"TABLEAUS", "SPLITTINGS", "ButcherTableau", "Splitting", "EULER", "MIDPOINT", "RK4",
+                     "SYMPLECTIC_EULER", "VERLET"}
+COEFFICIENT_ATTRIBUTES = {"scheme", "stability_polynomial"}
+CONTROLLER_NAMES = {"StepDoublingController", "propose"}
+
+
+def imported_name(dep, pkg="engine.ode"):
+    """``y`` for a ``from engine.ode[.sub] import y`` entry, else None."""
+    return dep.rsplit(".", 1)[1] if in_pkg(dep, pkg) and dep != pkg else None
+
+
+def violations(g, src=None):
+    """Every broken rule, one line each; ``src`` ({module: (source, is_package)}) adds the
+    rules that read attribute names, not only imports."""
     bad = []
     for m, deps in g.items():
         if in_pkg(m, "engine") and not in_pkg(m, "engine.tools") and m != "engine.__main__":
@@ -85,26 +114,64 @@ def violations(g):
                     for d in deps if in_pkg(d, "engine.tools")]
         if in_pkg(m, "engine.ode"):
             for layer in ("engine.particles", "engine.springs", "engine.scene", "engine.config",
-                          "engine.render", "engine.api", "engine.bodies"):
+                          "engine.render", "engine.api", "engine.bodies", "engine.control",
+                          "engine.colliders"):
                 bad += [f"{m} imports {d} (engine.ode stands alone)" for d in deps if in_pkg(d, layer)]
+            continue
+        bad += [f"{m} imports {d} (only engine.ode reads tableau coefficients)" for d in deps
+                if any(in_pkg(d, c) for c in COEFFICIENT_MODULES) or imported_name(d) in COEFFICIENT_NAMES]
+        bad += [f"{m} imports {d} (only the driver calls the controller)" for d in deps
+                if in_pkg(d, "engine.ode.controller") or imported_name(d) in CONTROLLER_NAMES]
+    for m, (text, _pkg) in (src or {}).items():
+        if in_pkg(m, "engine.ode"):
+            continue
+        used = attributes_of(text)
+        bad += [f"{m} reads .{a} (only engine.ode reads tableau coefficients)"
+                for a in sorted(used & COEFFICIENT_ATTRIBUTES)]
+        bad += [f"{m} calls .{a}() (only the driver calls the controller)"
+                for a in sorted(used & CONTROLLER_NAMES)]
     taichi = sorted(d for d in closure(g, "engine.config") if in_pkg(d, "taichi"))
     if taichi:
         bad.append(f"engine.config's import closure holds {taichi[0]} (validation needs no Taichi)")
     return bad
 
 
+def check(extra=None):
+    src = sources(extra)
+    return violations({n: imports_of(t, n, p) for n, (t, p) in src.items()}, src)
+
+
 def test_layers_hold():
-    assert violations(graph()) == []
+    assert check() == []
+
+
+def test_config_imports_no_taichi_when_run():
+    """The closure above reads imports; this runs one (engine.ode loads its Taichi parts lazily)."""
+    code = "import sys, engine.config; print(sorted(m for m in sys.modules if m.startswith('taichi'))[:1])"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
 
 
 @pytest.mark.parametrize("name, source, pkg, rule", [
     ("engine.scene", "from .tools import cli\n", False, "never imports the tools"),
     ("engine.render.raster", "from ..tools.bench import common\n", False, "never imports the tools"),
-    ("engine.ode.solve", "from ..particles.pool import ParticleState\n", False, "stands alone"),
-    ("engine.ode.solve", "import engine.scene\n", False, "stands alone"),
+    ("engine.ode.ivp", "from ..particles.pool import ParticleState\n", False, "stands alone"),
+    ("engine.ode.ivp", "import engine.scene\n", False, "stands alone"),
+    ("engine.ode.driver", "from ..control import Control\n", False, "stands alone"),
     ("engine.config.load", "from ..particles import pool\n", False, "no Taichi"),
+    ("engine.config.schema", "from ..ode.steppers import make_step\n", False, "no Taichi"),
+    ("engine.springs.system", "from ..ode.tableau import TABLEAUS\n", False, "tableau coefficients"),
+    ("engine.springs.stability", "from ..ode import RK4\n", False, "tableau coefficients"),
+    ("engine.particles.system", "b = METHODS[name].scheme.b\n", False, "tableau coefficients"),
+    ("engine.tools.bench.step", "g = TAB.stability_polynomial()\n", False, "tableau coefficients"),
+    ("engine.particles.system", "from ..ode.controller import StepDoublingController\n", False,
+     "only the driver calls the controller"),
+    ("engine.springs.system", "from ..ode import StepDoublingController\n", False,
+     "only the driver calls the controller"),
+    ("engine.springs.system", "ok, h = self.ctrl.propose(h, err)\n", False,
+     "only the driver calls the controller"),
 ])
 def test_planted_violation_is_caught(name, source, pkg, rule):
     """The checker is not blind: each rule fails on a violation planted in a real module."""
-    bad = violations(graph({name: (source, pkg)}))
+    bad = check({name: (source, pkg)})
     assert any(rule in b for b in bad), bad

@@ -10,9 +10,9 @@ import pytest
 import taichi as ti
 
 from engine.ode import METHODS, TABLEAUS, ButcherTableau, StepDoublingController, solve
-from engine.ode.controller import clip_to_target
-from engine.tools.problems import GROWTH, LOTKA_VOLTERRA, OSCILLATOR
+from engine.ode.driver import clip_to_target
 from engine.ode.steppers import doubling_step
+from engine.tools.problems import GROWTH, LOTKA_VOLTERRA, OSCILLATOR
 
 
 def test_tableaus_satisfy_invariants():
@@ -28,6 +28,22 @@ def test_bad_tableau_is_rejected_at_construction():
         ButcherTableau("bad", 2, c=(F(0), F(1, 2)), a=((), (F(1),)), b=(F(0), F(1)))
     with pytest.raises(ValueError, match="weights"):
         ButcherTableau("bad", 1, c=(F(0),), a=((),), b=(F(1, 2),))
+
+
+def test_bad_splitting_is_rejected_at_construction():
+    from engine.ode.splitting import DRIFT, KICK, Splitting
+
+    with pytest.raises(ValueError, match="first operation must be a kick"):
+        Splitting("bad", 1, ((DRIFT, F(1), F(0)), (KICK, F(1), F(0))))
+    with pytest.raises(ValueError, match="sum to 1"):
+        Splitting("bad", 2, ((KICK, F(1, 2), F(0)), (DRIFT, F(1), F(1, 2))))
+
+
+def test_stability_polynomials_come_from_the_tableaus():
+    # explicit RK with s = p stages: R(z) = Σ_{k ≤ p} z^k / k! (Hairer & Wanner II, §IV.2)
+    assert TABLEAUS["euler"].stability_polynomial() == (1, 1)
+    assert TABLEAUS["midpoint"].stability_polynomial() == (1, 1, F(1, 2))
+    assert TABLEAUS["rk4"].stability_polynomial() == (1, 1, F(1, 2), F(1, 6), F(1, 24))
 
 
 def _global_errors(method, ns, T=2.0, extrapolate=False):

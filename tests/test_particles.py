@@ -227,3 +227,29 @@ def test_moving_emitter_follows_its_path_and_hands_down_its_velocity():
     p = s.positions()
     # a particle born at t_b sits where the emitter was then and has moved 2 m/s since: x = 2·t
     np.testing.assert_allclose(p[:, 0], 2.0 * 0.5, atol=1e-3)
+
+
+def test_fixed_steps_fused_into_runs_give_the_same_bytes_as_step_by_step(monkeypatch):
+    """Where nothing is due between fixed steps (no births, still colliders, no sub-emitters)
+    they run in one launch: the same particles, bit for bit, and fewer launches."""
+    from engine.particles import integrate, system
+
+    d = scene_dict(frames=1, fps=30, seed=2, solver={"integrator": "rk4", "h": 1 / 240},
+                   forces={"gravity": [0.0, -9.81, 0.0], "drag": 0.4, "turbulence": {"strength": 3.0}},
+                   emitters=[{"rate": 20.0, "lifetime": 3.0, "speed": [1.0, 3.0], "spread": 40.0,
+                              "buoyancy": 4.0, "bursts": [{"time": 0.0, "count": 500}]}],
+                   colliders=[{"type": "plane"}])
+    runs = []
+    fused_kernel = integrate.step_fixed_run
+    monkeypatch.setattr(integrate, "step_fixed_run", lambda *a: runs.append(a[-1]) or fused_kernel(*a))
+    out = {}
+    for max_run in (1, system.MAX_RUN):
+        monkeypatch.setattr(system, "MAX_RUN", max_run)
+        s = make(d)
+        for _ in range(20):
+            s.advance_frame()
+        out[max_run] = (s.positions(), s.velocities(), s.stats.steps)
+    assert runs and min(runs) > 1 and sum(runs) > 100  # births every ~12 steps: runs of up to 11
+    assert out[1][2] == out[system.MAX_RUN][2] == 160
+    np.testing.assert_array_equal(out[1][0], out[system.MAX_RUN][0])
+    np.testing.assert_array_equal(out[1][1], out[system.MAX_RUN][1])

@@ -16,9 +16,10 @@ from typing import Annotated, List, Literal, Optional, Union
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from ..ode.methods import INTEGRATORS
 from ..particles.capacity import MAX_POOL, pool_sizes
 
-INTEGRATORS = ("euler", "midpoint", "rk4", "symplectic_euler", "verlet")
+BODY_INTEGRATORS = (*INTEGRATORS, "xpbd")  # soft bodies may also take XPBD (engine.springs.xpbd)
 
 
 class Strict(BaseModel):
@@ -289,7 +290,7 @@ class Body(Strict):
     pins: Union[Literal["none", "start", "corners", "top"], List[Annotated[int, Field(ge=0)]]] = "start"
     pin_path: List[Keyframe] = []  # pinned nodes follow this path (offsets from their start)
     release_at: Optional[NonNeg] = None  # seconds: every pin lets go
-    integrator: Optional[Literal["euler", "midpoint", "rk4", "symplectic_euler", "verlet", "xpbd"]] = None
+    integrator: Optional[Literal[BODY_INTEGRATORS]] = None
     substeps: Union[Literal["auto"], Annotated[int, Field(ge=1, le=10_000)]] = "auto"
     iterations: Annotated[int, Field(ge=1, le=200)] = 10  # XPBD solver iterations per substep
     max_stretch: Optional[Annotated[float, Field(ge=0, le=10)]] = None  # inextensibility cap
@@ -325,7 +326,7 @@ class Camera(Strict):
 
 
 class Solver(Strict):
-    integrator: Literal["euler", "midpoint", "rk4", "symplectic_euler", "verlet"] = "symplectic_euler"
+    integrator: Literal[INTEGRATORS] = "symplectic_euler"
     h: Annotated[float, Field(gt=0, le=1.0)] = 1.0 / 120.0  # base (fixed) step, seconds
     adaptive: bool = False  # step doubling
     tolerance: Annotated[float, Field(gt=0, le=1.0)] = 1e-3  # rtol for step doubling

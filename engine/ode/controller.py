@@ -2,22 +2,24 @@
 
 err is the scaled max-norm of the error estimate (≤ 1 accepts). The local error of an order-p
 method scales as h^(p+1), hence h_new = h · safety · err^(−1/(p+1)) (NUMERICS.md; Hairer §II.4),
-clamped to [min_factor, max_factor]·h, and never grown right after a rejection.
+clamped to [min_factor, max_factor]·h, and never grown right after a rejection. Only the driver
+(:mod:`engine.ode.driver`) calls it; the step-size limits (h_min, h_max, landing on a target)
+are the driver's.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0  # scipy's 0.9 / 0.2; Numerical Recipes' 5× growth
+
 
 @dataclass
 class StepDoublingController:
     order: int
-    safety: float = 0.9
-    min_factor: float = 0.2
-    max_factor: float = 5.0
-    h_min: float = 1e-12
-    h_max: float = math.inf
+    safety: float = SAFETY
+    min_factor: float = MIN_FACTOR
+    max_factor: float = MAX_FACTOR
     _rejected_last: bool = False
 
     def propose(self, h: float, err: float) -> tuple[bool, float]:
@@ -33,18 +35,4 @@ class StepDoublingController:
         if accept and self._rejected_last:
             factor = min(factor, 1.0)
         self._rejected_last = not accept
-        return accept, min(self.h_max, h * factor)
-
-
-def clip_to_target(t: float, h: float, t_target: float) -> tuple[float, bool]:
-    """Shorten h so a step lands exactly on ``t_target`` without leaving a sliver step.
-
-    Returns (h, lands). If h reaches the target (within 1%), take exactly the remainder; if two
-    steps of h would overshoot, split the remainder in two equal steps instead of one step plus a
-    sliver."""
-    rem = t_target - t
-    if h >= rem * 0.99:
-        return rem, True
-    if 2.0 * h > rem:
-        return rem / 2.0, False
-    return h, False
+        return accept, h * factor

@@ -21,8 +21,12 @@ the run is at most a growth limit times the largest over the first tenth:
 Bisection refines a grid of :data:`GRID` candidates per round to the first unstable step.
 
 *Predicted* (:func:`theory_limit`): the spectral radius of the one-step matrix of the linear
-spring, built independently in NumPy (a truncated exponential for the RK methods, i.e. |R(hλ)|,
-and kick/drift products for symplectic Euler and velocity Verlet in the engine's explicit form).
+spring, built in NumPy from the method's own data, independently of the Taichi steppers: R(hA)
+with the tableau's stability polynomial for the RK methods, the product of the kick and drift
+matrices for symplectic Euler and velocity Verlet in the engine's explicit form.
+
+*For a network of damped oscillators* (:func:`oscillator_stable_step`, the springs' stiffness
+guard): the largest h keeping every mode of λ² + cλ + ω² = 0 up to a bound ω_max stable.
 """
 import math
 from typing import Sequence, Union
@@ -31,7 +35,9 @@ import numpy as np
 import taichi as ti
 
 from ..runtime import ensure_init, on_reset
-from .steppers import METHODS, is_finite, make_step
+from .methods import method as _method
+from .splitting import DRIFT, Splitting
+from .steppers import is_finite, make_step
 
 GRID = 64  # candidate steps per spring per bisection round
 CAPACITY = 8192  # threads per kernel launch
@@ -102,8 +108,7 @@ on_reset(_probes.clear)
 
 
 def _probe(method: str) -> _Probe:
-    if method not in METHODS:
-        raise ValueError(f"method: unknown value {method!r}; allowed: {', '.join(METHODS)}")
+    _method(method)
     ensure_init()
     if method not in _probes:
         _probes[method] = _Probe(method)
@@ -146,28 +151,33 @@ def largest_stable_h(method: str, ks: float, kd: float, m: float = 1.0, steps: i
 
 # ---- linear stability theory (NumPy, independent of the Taichi steppers) ----
 
+def _polynomial(method: str) -> np.ndarray:
+    """The tableau's stability polynomial γ_0..γ_s as floats (engine.ode.tableau, exact there)."""
+    return np.array([float(g) for g in _method(method).scheme.stability_polynomial()])
+
+
 def step_matrix(method: str, h, ks: float, kd: float, m: float = 1.0) -> np.ndarray:
     """The 2×2 matrices M with (q, v)⁺ = M (q, v) for one step of ``method`` on the spring; ``h``
     may be an array (result shape ``h.shape + (2, 2)``)."""
+    scheme = _method(method).scheme
     h = np.asarray(h, dtype=np.float64)[..., None, None]
     w2, c = ks / m, kd / m
     one, zero = np.ones_like(h), np.zeros_like(h)
     mat = lambda a, b, cc, d: np.concatenate(  # noqa: E731
         [np.concatenate([a, b], -1), np.concatenate([cc, d], -1)], -2)
-    if method in ("euler", "midpoint", "rk4"):
+    if not isinstance(scheme, Splitting):  # R(hA) = Σ γ_k (hA)^k
         A = h * np.array([[0.0, 1.0], [-w2, -c]])
-        M = term = np.broadcast_to(np.eye(2), A.shape)
-        for k in range(1, METHODS[method].order + 1):  # explicit RK with s = p: R(z) = Σ z^k/k!
-            term = term @ A / k
-            M = M + term
+        M, term = 0.0, np.broadcast_to(np.eye(2), A.shape)
+        for g in _polynomial(method):
+            M = M + g * term
+            term = term @ A
         return M
-    drift = mat(one, h, zero, one)
-    if method == "symplectic_euler":  # v⁺ = v + h a(q, v); q⁺ = q + h v⁺
-        return drift @ mat(one, zero, -h * w2, 1.0 - h * c)
-    if method == "verlet":  # half kick a(q, v), drift, half kick a(q⁺, v½)
-        kick = mat(one, zero, -0.5 * h * w2, 1.0 - 0.5 * h * c)
-        return kick @ drift @ kick
-    raise ValueError(f"method: unknown value {method!r}; allowed: {', '.join(METHODS)}")
+    M = np.broadcast_to(np.eye(2), h.shape[:-2] + (2, 2))
+    for kind, w, _c in scheme.ops:  # drift: q += w h v; kick: v += w h a(q, v)
+        wh = float(w) * h
+        op = mat(one, wh, zero, one) if kind == DRIFT else mat(one, zero, -wh * w2, 1.0 - wh * c)
+        M = op @ M
+    return M
 
 
 def spectral_radius(method: str, h, ks: float, kd: float, m: float = 1.0):
@@ -208,5 +218,47 @@ def numerics_formula(method: str, ks: float, kd: float, m: float = 1.0) -> Union
     return None
 
 
+def rk_stable_step(method: str, lams) -> float:
+    """Largest h with |R(hλ)| ≤ 1 for every λ in ``lams`` (complex), R the tableau's stability
+    polynomial; 0.0 when some λ on the imaginary axis is outside the region for every h."""
+    coeffs = _polynomial(method)[::-1]  # highest power first for np.polyval
+    lam = np.asarray(lams, complex)
+    if np.any((lam.real == 0) & (lam.imag != 0)) and abs(np.polyval(coeffs, 0.01j)) > 1:
+        return 0.0  # undamped modes sit on the imaginary axis, outside this method's region
+
+    def stable(h):
+        return bool(np.all(np.abs(np.polyval(coeffs, h * lam)) <= 1 + 1e-12))
+
+    lo, hi = 0.0, 8.0 / np.max(np.abs(lam))
+    if stable(hi):
+        return hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def oscillator_stable_step(method: str, omega: float, c: float, q_values) -> float:
+    """Largest stable h for damped oscillators with frequencies up to ``omega`` (rad/s):
+
+    * kick–drift methods (symplectic Euler, Verlet): h²ω² + 2hc < 4 with the damping rate bound
+      c (1/s), i.e. h < (√(c² + 4ω²) − c)/ω² (NUMERICS.md; 2/ω undamped).
+    * tableaus: |R(hλ)| ≤ 1 for the modes of λ² + cλ + ω² = 0 with ω in (0, omega] and damping
+      proportional to stiffness, c = q ω², for each ratio q in ``q_values`` (kd/ks of the springs).
+    """
+    if omega <= 0:
+        return math.inf
+    if _method(method).partitioned:
+        return (math.sqrt(c * c + 4 * omega * omega) - c) / (omega * omega)
+    w = omega * np.linspace(1.0 / 400, 1.0, 400)
+    lams = []
+    for q in q_values:
+        cq = q * w * w
+        disc = np.sqrt((cq * cq - 4 * w * w).astype(complex))
+        lams += [(-cq + disc) / 2, (-cq - disc) / 2]
+    return rk_stable_step(method, np.concatenate(lams))
+
+
 __all__: Sequence[str] = ["largest_stable_h", "largest_stable_h_batch", "theory_limit",
-                          "numerics_formula", "step_matrix", "spectral_radius"]
+                          "numerics_formula", "step_matrix", "spectral_radius", "rk_stable_step",
+                          "oscillator_stable_step"]

@@ -1,24 +1,49 @@
-"""One-step methods as Taichi functions, generated from data at compile time.
+"""One-step methods as Taichi functions on one element's state, generated from the method data.
 
 Every stepper here has the signature ``step(y, t, h, i) -> y_next`` where ``y`` is a
 ``ti.Vector`` of any length n, ``t`` and ``h`` are scalars of the state's dtype and ``i`` is an
 opaque integer context (an element index in a batch) handed through to the derivative
-``f(y, t, i) -> dy/dt``. The steppers know nothing else: not particles, not springs.
+``f(y, t, i) -> dy/dt``. The steppers know nothing else: not particles, not springs. They run
+*fused*: every stage of one element in registers, which suits independent elements (particles,
+small ODEs). Coupled elements (spring networks) run the same schemes staged over whole fields
+(:mod:`engine.ode.staged`); both go through :func:`lincomb`, the one place a scheme's coefficients
+meet the state.
 
-* :func:`rk_step` runs any :class:`~engine.ode.tableau.ButcherTableau`; stages are unrolled with
-  ``ti.static`` so a tableau costs exactly its stages and adding a method means adding data.
-* :func:`symplectic_euler_step` and :func:`verlet_step` are partitioned methods for second-order
-  systems y = (q, p): the first half of y is the position-like part, the second half the
-  velocity-like part (for particles q = x, p = v, f = (v, a(x, v, t))).
+* a :class:`~engine.ode.tableau.ButcherTableau` (euler, midpoint, rk4): stages unrolled with
+  ``ti.static``, so a tableau costs exactly its stages and adding a method means adding data.
+* a :class:`~engine.ode.splitting.Splitting` (symplectic_euler, verlet): kicks and drifts of the
+  halves of y = (q, p); for particles q = (x, age), p = (v, 0), f = (v, 1, a(x, v, t), 0).
 """
-from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
+from typing import Callable  # no __future__ annotations: Taichi reads them
 
 import taichi as ti
 
-from .tableau import TABLEAUS, ButcherTableau
+from .methods import method as _method
+from .splitting import KICK, Splitting
+
+
+def coefficients(row):
+    """Exact fractions as (numerator, denominator) pairs for :func:`lincomb`."""
+    return tuple((q.numerator, q.denominator) for q in row)
+
+
+@ti.func
+def times(h, q: ti.template(), dtype: ti.template()):
+    """h·q for an exact fraction q = (numerator, denominator), emitted as h·num/den in ``dtype``:
+    exact for the rational schemes (h/6, not h times a rounded 1/6), and an f64 kernel never sees
+    a constant rounded through Taichi's f32 default."""
+    return h * ti.cast(q[0], dtype) / ti.cast(q[1], dtype)
+
+
+@ti.func
+def lincomb(y, h, coef: ti.template(), ks: ti.template(), dtype: ti.template()):
+    """y + Σ_m (h·coef_m)·ks_m over the nonzero coefficients, unrolled at compile time."""
+    out = y
+    for m in ti.static(range(len(coef))):
+        if ti.static(coef[m][0] != 0):
+            out = out + times(h, coef[m], dtype) * ks[m]
+    return out
 
 
 def _with_first_eval(_step, f, with_k1: bool):
@@ -34,118 +59,66 @@ def _with_first_eval(_step, f, with_k1: bool):
     return step
 
 
-def rk_step(tab: ButcherTableau, f: Callable, dtype, with_k1: bool = False):
-    """Explicit RK step for ``tab``. With ``with_k1`` the function takes ``f(y, t, i)`` precomputed
-    as a fifth argument (step doubling shares it between the full step and the first half step).
-
-    Each coefficient is emitted as cast(numerator)/cast(denominator) in ``dtype``: exact for the
-    rational tableaus, and an f64 kernel never sees a constant rounded through Taichi's f32."""
+def rk_step(tab, f: Callable, dtype, with_k1: bool = False):
+    """Explicit RK step for the tableau ``tab``: k_j = f(y + h Σ_m a_jm k_m, t + c_j h),
+    y⁺ = y + h Σ_j b_j k_j."""
     s = tab.stages
-    nd = lambda q: (q.numerator, q.denominator)  # noqa: E731
-    A = tuple(tuple(nd(q) for q in row) for row in tab.a)
-    C = tuple(nd(q) for q in tab.c)
-    B = tuple(nd(q) for q in tab.b)
+    A = tuple(coefficients(row) for row in tab.a)
+    C = coefficients(tab.c)
+    B = coefficients(tab.b)
 
     @ti.func
     def _step(y, t, h, i, d1):
         ks = [d1] * s  # derivatives f(Y_j, t + c_j h), one per stage (a Python list, unrolled)
         for j in ti.static(range(1, s)):
-            yj = y
-            for m in ti.static(range(j)):
-                if ti.static(A[j][m][0] != 0):
-                    yj = yj + (h * ti.cast(A[j][m][0], dtype) / ti.cast(A[j][m][1], dtype)) * ks[m]
-            tj = t + h * ti.cast(C[j][0], dtype) / ti.cast(C[j][1], dtype)
-            ks[j] = f(yj, tj, i)
-        out = y
-        for j in ti.static(range(s)):
-            if ti.static(B[j][0] != 0):
-                out = out + (h * ti.cast(B[j][0], dtype) / ti.cast(B[j][1], dtype)) * ks[j]
-        return out
+            yj = lincomb(y, h, A[j], ks, dtype)
+            ks[j] = f(yj, t + times(h, C[j], dtype), i)
+        return lincomb(y, h, B, ks, dtype)
 
     return _with_first_eval(_step, f, with_k1)
 
 
-def _half_masks(n: int, dtype):
+def _half_masks(n: int):
     if n % 2:
         raise ValueError(f"partitioned methods need an even state length (q, p); got {n}")
     m = n // 2
     return [1] * m + [0] * m, [0] * m + [1] * m
 
 
-def symplectic_euler_step(f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
-    """Semi-implicit Euler: p⁺ = p + h f_p(q, p, t); q⁺ = q + h f_q(q, p⁺, t). Order 1, symplectic.
-
-    For particles: v⁺ = v + h a(x, v, t), x⁺ = x + h v⁺. Two evaluations of f per step; the second
-    needs only its q-part, so a caller that has a cheap ``fq`` (for particles: just v) passes it
-    and the expensive p-part (forces) is evaluated once."""
-    mq, mp = _half_masks(n, dtype)
+def splitting_step(spl: Splitting, f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
+    """A kick–drift step on y = (q, p): the first half of y is q, the second p. A kick adds
+    w·h·(p-part of f), a drift w·h·(q-part of f). The drift needs only the q-part, so a caller
+    with a cheap ``fq`` (for particles: just v) passes it and the forces are evaluated only in
+    the kicks."""
+    mq, mp = _half_masks(n)
     fq = fq or f
+    ops = tuple((kind, coefficients((w,)), coefficients((c,))[0]) for kind, w, c in spl.ops)
 
     @ti.func
     def _step(y, t, h, i, d1):
         Mq = ti.Vector(mq, dt=dtype)
         Mp = ti.Vector(mp, dt=dtype)
-        y1 = y + h * (Mp * d1)
-        return y1 + h * (Mq * fq(y1, t, i))
+        for k in ti.static(range(len(ops))):
+            tk = t + times(h, ops[k][2], dtype)
+            if ti.static(ops[k][0] == KICK):
+                d = d1
+                if ti.static(k > 0):
+                    d = f(y, tk, i)
+                y = lincomb(y, h, ops[k][1], [Mp * d], dtype)
+            else:
+                y = lincomb(y, h, ops[k][1], [Mq * fq(y, tk, i)], dtype)
+        return y
 
     return _with_first_eval(_step, f, with_k1)
-
-
-def verlet_step(f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
-    """Velocity Verlet (Störmer–Verlet, kick–drift–kick):
-    p½ = p + h/2 f_p(q, p, t); q⁺ = q + h f_q(q, p½, t + h/2); p⁺ = p½ + h/2 f_p(q⁺, p½, t + h).
-
-    Order 2 and symplectic when f_p depends on q only. Velocity-dependent forces (drag) enter the
-    closing kick as f_p(q⁺, p½): the explicit form, which drops to order 1 for such forces
-    (NUMERICS.md); the exact form would need an implicit solve for p⁺. The drift needs only the
-    q-part of f: pass a cheap ``fq`` to skip the forces there."""
-    mq, mp = _half_masks(n, dtype)
-    fq = fq or f
-
-    @ti.func
-    def _step(y, t, h, i, d1):
-        Mq = ti.Vector(mq, dt=dtype)
-        Mp = ti.Vector(mp, dt=dtype)
-        half = h / 2
-        y1 = y + half * (Mp * d1)
-        y2 = y1 + h * (Mq * fq(y1, t + half, i))
-        return y2 + half * (Mp * f(y2, t + h, i))
-
-    return _with_first_eval(_step, f, with_k1)
-
-
-@dataclass(frozen=True)
-class Method:
-    """What the solver and controller need to know about a method: its order and its cost."""
-
-    name: str
-    order: int
-    fevals: int  # derivative evaluations per step
-    partitioned: bool  # needs y = (q, p)
-    symplectic: bool
-
-
-METHODS = {
-    "euler": Method("euler", 1, 1, False, False),
-    "midpoint": Method("midpoint", 2, 2, False, False),
-    "rk4": Method("rk4", 4, 4, False, False),
-    "symplectic_euler": Method("symplectic_euler", 1, 2, True, True),
-    "verlet": Method("verlet", 2, 3, True, True),
-}
-assert all(METHODS[t].order == TABLEAUS[t].order and METHODS[t].fevals == TABLEAUS[t].stages
-           for t in TABLEAUS)
 
 
 def make_step(method: str, f: Callable, n: int, dtype, with_k1: bool = False, fq=None):
-    """The ``ti.func`` stepper for ``method`` (one of :data:`METHODS`) on states of length n.
-    ``fq`` (partitioned methods only) evaluates just the q-part of f cheaply."""
-    if method in TABLEAUS:
-        return rk_step(TABLEAUS[method], f, dtype, with_k1)
-    if method == "symplectic_euler":
-        return symplectic_euler_step(f, n, dtype, with_k1, fq)
-    if method == "verlet":
-        return verlet_step(f, n, dtype, with_k1, fq)
-    raise ValueError(f"method: unknown value {method!r}; allowed: {', '.join(METHODS)}")
+    """The ``ti.func`` stepper for ``method`` (a name of :data:`~engine.ode.methods.METHODS`) on
+    states of length n. ``fq`` (partitioned methods only) evaluates just the q-part of f cheaply."""
+    scheme = _method(method).scheme
+    if isinstance(scheme, Splitting):
+        return splitting_step(scheme, f, n, dtype, with_k1, fq)
+    return rk_step(scheme, f, dtype, with_k1)
 
 
 def doubling_step(method: str, f: Callable, n: int, dtype, extrapolate: bool = False, fq=None):
@@ -153,7 +126,7 @@ def doubling_step(method: str, f: Callable, n: int, dtype, extrapolate: bool = F
     two steps of h/2 (or its local extrapolation y2 + Δ/(2^p − 1), order p + 1) and
     ``est = Δ/(2^p − 1)`` with Δ = y2 − y1 estimates y2's local error. f(y, t) is evaluated once and
     shared by the full step and the first half step: Euler costs 2 evaluations, midpoint 5, RK4 11."""
-    meth = METHODS[method]
+    meth = _method(method)
     step = make_step(method, f, n, dtype, with_k1=True, fq=fq)
     denom = 2 ** meth.order - 1
 
@@ -170,11 +143,6 @@ def doubling_step(method: str, f: Callable, n: int, dtype, extrapolate: bool = F
         return y2, est
 
     return dstep
-
-
-def doubling_fevals(method: str) -> int:
-    """Derivative evaluations per step-doubling attempt (3 steps, one shared first evaluation)."""
-    return 3 * METHODS[method].fevals - 1
 
 
 @ti.func

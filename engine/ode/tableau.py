@@ -45,6 +45,18 @@ class ButcherTableau:
     def stages(self) -> int:
         return len(self.b)
 
+    def stability_polynomial(self) -> Tuple[F, ...]:
+        """Exact coefficients γ_0..γ_s of R(z) = Σ γ_k z^k, the factor one step multiplies a mode
+        of y' = λy by (z = hλ): R(z) = 1 + z bᵀ(I − zA)⁻¹𝟙 = 1 + Σ_k bᵀA^(k−1)𝟙 z^k for an explicit
+        method (A nilpotent, so the series stops at k = s). Hairer & Wanner, *Solving ODEs II*, §IV.2."""
+        s = self.stages
+        v = [F(1)] * s  # A^(k−1) 𝟙
+        gamma = [F(1)]
+        for _ in range(s):
+            gamma.append(sum((bi * vi for bi, vi in zip(self.b, v)), F(0)))
+            v = [sum((row[m] * v[m] for m in range(len(row))), F(0)) for row in self.a]
+        return tuple(gamma)
+
 
 EULER = ButcherTableau("euler", 1, c=(F(0),), a=((),), b=(F(1),))
 

@@ -2,8 +2,9 @@
 
 The set of terms is fixed when the scene is finalised: a term the scene does not use is not
 compiled at all. Each term maps (x, v, age, t, i) → acceleration (m/s²), with the particle's age at the
-stage time (it is part of the integrated state); parameters a game may change
-at run time (gravity, wind) live in 0-d fields, so changing them recompiles nothing.
+stage time (it is part of the integrated state); what a game may change at run time (gravity,
+wind) is read from the scene's Control (engine.control: 0-d fields, so changing them recompiles
+nothing).
 """
 from __future__ import annotations
 
@@ -15,17 +16,14 @@ from .noise import curl_noise
 
 
 class Forces:
-    """Fields: ``force_gravity`` (vec3, m/s²; scaled per emitter by ``gravity_scale``),
-    ``force_wind`` (vec3, m/s), ``force_drag`` (1/s, the scene's linear drag; an emitter's own
-    ``drag`` overrides it for its particles)."""
+    """Fields: ``force_drag`` (1/s, the scene's linear drag; an emitter's own ``drag`` overrides
+    it for its particles) and the per-emitter parameters of the terms in use. Gravity (m/s²,
+    scaled per emitter by ``gravity_scale``) and wind (m/s) are the control's."""
 
-    def __init__(self, cfg, emitter_configs, state, emitter_drag):
+    def __init__(self, cfg, emitter_configs, state, emitter_drag, control):
         E = len(emitter_configs)
-        self.force_gravity = ti.Vector.field(3, ti.f32, shape=())
-        self.force_wind = ti.Vector.field(3, ti.f32, shape=())
+        self.control = control
         self.force_drag = ti.field(ti.f32, shape=())
-        self.force_gravity[None] = cfg.gravity
-        self.force_wind[None] = cfg.wind
         self.force_drag[None] = cfg.drag
         self.use_gravity = any(g != 0.0 for g in cfg.gravity) and any(
             e.gravity_scale != 0 for e in emitter_configs)
@@ -80,7 +78,7 @@ class Forces:
 
     def make_accel(self):
         """``accel(x, v, age, t, i)``: the sum of the scene's terms for particle slot i."""
-        g, wind, kdrag = self.force_gravity, self.force_wind, self.force_drag
+        g, wind, kdrag = self.control.gravity, self.control.wind, self.force_drag
         pem, edrag = self._state.particle_emitter, self._emitter_drag
         per_emitter, per_emitter_g = self.per_emitter_drag, self.per_emitter_gravity
 

@@ -46,6 +46,7 @@ PARTICLE_FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_lif
                    "particle_emitter", "particle_rand")
 
 
+@ti.data_oriented
 class ParticleState:
     """State of every slot, shape (capacity,):
 
@@ -59,16 +60,14 @@ class ParticleState:
     def __init__(self, capacity: int, adaptive: bool, events: bool = False):
         n = max(1, capacity)
         self.capacity = capacity
-        self.particle_pos = ti.Vector.field(3, ti.f32, shape=n)
-        self.particle_vel = ti.Vector.field(3, ti.f32, shape=n)
-        self.particle_age = ti.field(ti.f32, shape=n)
-        self.particle_life = ti.field(ti.f32, shape=n)
-        self.particle_alive = ti.field(ti.i32, shape=n)
-        self.particle_emitter = ti.field(ti.i32, shape=n)
-        self.particle_rand = ti.field(ti.f32, shape=n)
+        vec3 = lambda: ti.Vector.field(3, ti.f32, shape=n)  # noqa: E731
+        scalar = lambda dtype: ti.field(dtype, shape=n)  # noqa: E731
+        self.particle_pos, self.particle_vel = vec3(), vec3()
+        self.particle_age, self.particle_life = scalar(ti.f32), scalar(ti.f32)
+        self.particle_alive, self.particle_emitter = scalar(ti.i32), scalar(ti.i32)
+        self.particle_rand = scalar(ti.f32)
         if events:  # sub-emitters: what happened to each particle during the last step
-            self.particle_event = ti.field(ti.i32, shape=n)  # bit 1 died, bit 2 hit a collider
-            self.particle_impact = ti.field(ti.f32, shape=n)  # |Δv| of its last collision, m/s
+            self.particle_event = scalar(ti.i32)  # bit 1 died, bit 2 hit a collider
+            self.particle_impact = scalar(ti.f32)  # |Δv| of its last collision, m/s
         if adaptive:
-            self.cand_pos = ti.Vector.field(3, ti.f32, shape=n)
-            self.cand_vel = ti.Vector.field(3, ti.f32, shape=n)
+            self.cand_pos, self.cand_vel = vec3(), vec3()

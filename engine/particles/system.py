@@ -1,113 +1,163 @@
 """The particle half of a scene: pool, emitters, forces and integrator, stepped to frame times.
 
-Built once from a validated config (``finalize`` happens in the constructor: every field is
-allocated and every kernel compiled before the first step). Fixed steps divide each interval into
-equal substeps that land exactly on its end; adaptive steps are step doubling with the ODE core's
-controller, clipped to land exactly on the end without a sliver step.
+Built once from a validated config (every field is allocated and every kernel compiled for the
+scene's features before the first step). The steps are chosen by the ODE core's
+:class:`~engine.ode.driver.Driver` — equal fixed substeps landing exactly on each target, or step
+doubling with the one controller — and this class implements its protocol: a step emits what is
+due, moves the colliders to the control's positions, launches the fused step kernel and the
+sub-emitter passes. Nothing is read back per step: the non-finite check once per ``advance``, the
+live count when asked.
 """
 from __future__ import annotations
 
-import math
+import copy
 
-from ..ode.controller import StepDoublingController, clip_to_target
-from ..ode.steppers import METHODS
-from ..runtime import check_stop
+import numpy as np
+
+from ..ode.driver import Driver, StepPolicy
+from ..ode.methods import METHODS
+from . import integrate
 from .emitters import Emitters
 from .forces import Forces
 from .integrate import NO_FAILURE, ParticleIntegrator
-from .pool import ParticleState, PoolLayout
+from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout
 
-
-class DivergenceError(RuntimeError):
-    """The simulation produced a non-finite state; the message names integrator, h and time."""
+H_MAX_FACTOR = 64  # an adaptive step may grow to 64 × the configured h
+MAX_RUN = 32  # fixed steps fused into one launch at most (a stop request waits for at most this many)
 
 
 class ParticleSystem:
-    def __init__(self, cfg, colliders, stats, contacts: int = 0):
+    def __init__(self, cfg, colliders, control, stats, contacts: int = 0):
         self.cfg = cfg
         sol = cfg.solver
         self.method, self.adaptive, self.stats = sol.integrator, sol.adaptive, stats
+        self.label = f"integrator {self.method}"
+        self.control = control
         self.layout = PoolLayout.for_emitters(cfg.emitters, 1.0 / cfg.fps)
-        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed)
-        self.state = ParticleState(self.layout.capacity, self.adaptive, self.emitters.uses_events)
-        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag)
+        events = any(e.sub_emitters for e in cfg.emitters)
+        self.state = ParticleState(self.layout.capacity, self.adaptive, events)
+        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state)
+        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control)
         self.colliders = colliders
-        self.moving_colliders = any(s.path for s in colliders.specs)
         collide = colliders.make_func(report=True) if colliders.count else None
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
                                              self.method, self.adaptive,
                                              events=self.emitters.uses_events, contacts=contacts)
-        self.emitters.build(self.state)
-        self.h_last = sol.h
-        if self.adaptive:
-            self.controller = StepDoublingController(order=METHODS[self.method].order)
-            self._h_try = sol.h
-            self._atol = sol.atol if sol.atol is not None else sol.tolerance
-
-    def _step_fixed(self, t, h):
-        self.emitters.emit(t, h)
-        if self.moving_colliders:
-            self.colliders.move_to(t + h)
-        self.integrator.step_fixed(t, h)
-        self.emitters.emit_children()
-        self.h_last = h
-        self.stats.steps += 1
-
-    def _advance_adaptive(self, t, t_target):
-        sol = self.cfg.solver
-        steps = 0
-        while t < t_target:
-            check_stop()
-            if steps >= sol.max_steps_per_frame:
-                raise DivergenceError(
-                    f"integrator {self.method}: more than {sol.max_steps_per_frame} steps in the frame "
-                    f"ending t={t_target:.4g} s (h={self._h_try:.3g} s); raise solver.tolerance or "
-                    f"solver.max_steps_per_frame")
-            h, lands = clip_to_target(t, self._h_try, t_target)
-            self.emitters.emit(t, h)  # newborns wait (negative age) if the step is retried shorter
-            if self.moving_colliders:
-                self.colliders.move_to(t + h)
-            err = self.integrator.attempt(t, h, self._atol, sol.tolerance)
-            ok, h_new = self.controller.propose(h, err)
-            steps += 1
-            if not ok:
-                self.stats.rejected += 1
-                self._h_try = h_new
-                if h_new < 1e-9:
-                    raise DivergenceError(
-                        f"integrator {self.method} diverged at t={t:.4g} s: step size fell to "
-                        f"h={h_new:.3g} s (error estimate {err:.3g})")
-                continue
-            self.integrator.commit(t, h)
-            self.emitters.emit_children()
-            self.h_last = h
-            t = t_target if lands else t + h
-            self.stats.steps += 1
-            self.stats.h_min = min(self.stats.h_min, h)
-            self.stats.h_max = max(self.stats.h_max, h)
-            self._h_try = max(h_new, self._h_try) if lands else min(h_new, sol.h * 64)
+        self.order = METHODS[self.method].order
+        atol = sol.atol if sol.atol is not None else sol.tolerance
+        self.atol, self.rtol = atol, sol.tolerance
+        self.driver = Driver(self, StepPolicy(
+            h=sol.h, adaptive=self.adaptive, rtol=sol.tolerance, atol=atol, h_max=H_MAX_FACTOR * sol.h,
+            max_steps=sol.max_steps_per_frame,
+            max_steps_hint="raise solver.tolerance or solver.max_steps_per_frame"), stats)
+        self._alive = None  # the live count, read back when first asked after an advance
+        self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
 
     def advance(self, t: float, dt: float) -> None:
-        """Advance from t by dt seconds (any length), landing exactly on t + dt."""
-        t_target = t + dt
-        if self.adaptive:
-            self._advance_adaptive(t, t_target)
-        else:
-            n = max(1, math.ceil(dt / self.cfg.solver.h - 1e-9))
-            h = dt / n  # equal substeps that land exactly on the target
-            for j in range(n):
-                check_stop()
-                self._step_fixed(t + j * h, h)
-            self.stats.h_min = min(self.stats.h_min, h)
-            self.stats.h_max = max(self.stats.h_max, h)
-        bad = float(self.integrator.nonfinite_t[None])
-        if bad < NO_FAILURE:
-            raise DivergenceError(
-                f"integrator {self.method} diverged: non-finite particle state at t={bad:.4g} s "
-                f"with h={self.h_last:.4g} s")
+        """Advance from t by dt seconds (any length), landing exactly on t + dt. Contacts recorded
+        are those of this advance."""
+        I = self.integrator
+        if I.record:
+            I.contact_count[None] = 0
+        self._alive = None
+        self.driver.advance(t, t + dt)
 
+    # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
+    def _move_colliders(self, t_end: float) -> bool:
+        """Put moving colliders where the control says they are at t_end; whether any moves."""
+        moving = bool(self.colliders.count) and self.control.colliders_move
+        if moving:
+            self.colliders.move_to(t_end, self.control.collider_positions(t_end))
+        return moving
+
+    def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
+        """Step j of h from t0 (step m starts at t0 + m·h); then, while nothing has to happen
+        between steps — no births due, colliders still, no sub-emitters — the following steps in
+        the same launch (at most MAX_RUN). Births due at the step a run stops before are held for
+        the next call, so the emitters' clocks advance exactly as step by step."""
+        t = t0 + j * h
+        held, self._held = self._held, None
+        self.emitters.spawn(held[1] if held is not None and held[0] == (t0, h, j) else self.emitters.plan(t, h))
+        k = 1
+        if not self._move_colliders(t + h) and not self.emitters.uses_events:
+            while j + k < min(n, j + MAX_RUN):
+                due = self.emitters.plan(t0 + (j + k) * h, h)
+                if due is not None:
+                    self._held = ((t0, h, j + k), due)
+                    break
+                k += 1
+        if self.layout.capacity:
+            if k == 1:
+                integrate.step_fixed(self.integrator, t, h)
+            else:
+                integrate.step_fixed_run(self.integrator, t0, h, j, k)
+        self.emitters.emit_children()
+        return k
+
+    def attempt(self, t: float, h: float) -> float:
+        self.emitters.emit(t, h)  # newborns wait (negative age) if the attempt is retried shorter
+        self._move_colliders(t + h)
+        if not self.layout.capacity:
+            return 0.0
+        return float(integrate.attempt(self.integrator, t, h, self.atol, self.rtol))
+
+    def commit(self, t: float, h: float) -> None:
+        if self.layout.capacity:
+            integrate.commit(self.integrator, t, h)
+        self.emitters.emit_children()
+
+    def rollback(self) -> None:
+        pass  # the trial sits in cand_pos / cand_vel until committed
+
+    def first_nonfinite(self):
+        f = self.integrator.nonfinite_t
+        bad = float(f[None])
+        if bad >= NO_FAILURE:
+            return None
+        f[None] = NO_FAILURE
+        return bad
+
+    # -- read-back ----------------------------------------------------------------------------------
     def count_alive(self) -> int:
-        return int(self.integrator.count_alive())
+        """Live slots (particles not yet born this step included): one read-back per advance."""
+        if self._alive is None:
+            self._alive = int(integrate.count_alive(self.state.particle_alive, self.layout.capacity))
+        return self._alive
 
     def dropped(self) -> int:
         return int(self.emitters.dropped_counts().sum())
+
+    def contacts(self):
+        """(collider, position, normal, speed, time, slot) arrays of the contacts recorded in the
+        last advance, sorted by time then pool slot, and how many did not fit the buffer."""
+        I = self.integrator
+        n = int(I.contact_count[None])
+        k = min(n, I.max_contacts)
+        slot = I.contact_slot.to_numpy()[:k]
+        tt = I.contact_time.to_numpy()[:k]
+        order = np.lexsort((slot, tt))  # deterministic, whatever order threads wrote them in
+        cols = (I.contact_collider, I.contact_pos, I.contact_normal, I.contact_speed)
+        return tuple(c.to_numpy()[:k][order] for c in cols) + (tt[order], slot[order]), max(0, n - k)
+
+    def carry_from(self, old: "ParticleSystem") -> None:
+        """Copy each named emitter's ring (particles, head, serial, clock) from ``old`` (the same
+        scene before a rebuild) into this pool."""
+        src = {f: getattr(old.state, f).to_numpy() for f in PARTICLE_FIELDS}
+        dst = {f: getattr(self.state, f).to_numpy() for f in PARTICLE_FIELDS}
+        old_names = [c.name for c in old.emitters.configs]
+        for e_new, c in enumerate(self.emitters.configs):
+            if not c.name or c.name not in old_names:
+                continue
+            e_old = old_names.index(c.name)
+            a, n_old = old.layout.starts[e_old], old.layout.sizes[e_old]
+            b, n_new = self.layout.starts[e_new], self.layout.sizes[e_new]
+            n = min(n_old, n_new)
+            for f in PARTICLE_FIELDS:
+                dst[f][b:b + n] = src[f][a:a + n]
+            dst["particle_emitter"][b:b + n] = e_new
+            self.emitters.clocks[e_new] = copy.copy(old.emitters.clocks[e_old])
+            self.emitters.emitter_head[e_new] = int(old.emitters.emitter_head[e_old]) % n_new
+            self.emitters.emitter_serial[e_new] = int(old.emitters.emitter_serial[e_old])
+        for f in PARTICLE_FIELDS:
+            getattr(self.state, f).from_numpy(dst[f])
+

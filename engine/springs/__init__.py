@@ -1,10 +1,12 @@
 """Spring networks (soft bodies): topologies, model/state fields, integrators, XPBD, the system.
 
-Layout follows a Model (fixed topology and parameters) / State (positions, velocities) split:
-:mod:`.topology` (numpy builders), :mod:`.model` (fields, CSR adjacency, edge colouring),
-:mod:`.forces` (gather and atomic accumulation), :mod:`.integrators` (explicit, stage by stage),
-:mod:`.xpbd`, :mod:`.constraints` (pins, collisions), :mod:`.limits` (stretch caps), :mod:`.stability` (the
-stiffness guard), :mod:`.adaptive` (step doubling buffers), :mod:`.energy`, :mod:`.system`.
+Layout follows a Model (fixed topology and parameters) / State (positions, velocities) / Control
+(gravity, collider positions: engine.control) split: :mod:`.topology` (numpy builders),
+:mod:`.model` (fields, CSR adjacency, edge colouring), :mod:`.forces` (gather and atomic
+accumulation), :mod:`.xpbd`, :mod:`.constraints` (pins, collisions), :mod:`.limits` (stretch caps),
+:mod:`.stability` (the stiffness guard), :mod:`.energy`, :mod:`.system`. The explicit methods and
+step doubling are the ODE core's, staged over the network's fields (engine.ode.staged), and the
+steps are chosen by its driver (engine.ode.driver).
 """
 from .energy import write_energy_csv
 from .stability import StiffnessError

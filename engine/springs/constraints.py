@@ -4,58 +4,58 @@
   velocity that carries it from where it is to its target at the end of the step,
   lerp(pin_start, pin_target, alpha) — fixed pins get v = 0, moving pins an inferred velocity.
 * stretch limits run between the two (see :mod:`.limits`).
-* ``finalize(alpha, k)`` after: pinned nodes snap exactly onto their target; every other node goes
-  through the Colliders' ``collide(x, v)`` (evaluated in f32, the colliders' precision, and written
-  back only where it touched something); a non-finite node records substep index k in ``bad``.
+* ``finalize(alpha, t_end)`` after: pinned nodes snap exactly onto their target; every other node
+  goes through the Colliders' ``collide(x, v)`` (evaluated in f32, the colliders' precision, and
+  written back only where it touched something); a non-finite node records the step's end time.
 """
 import taichi as ti
 
 from ..ode.steppers import is_finite
-from .model import SpringModel, SpringState
 
-NO_FAILURE = 2 ** 30
+NO_FAILURE = 1e30  # bad_t sentinel: no node went non-finite
 
 
-def make_constraint_kernels(model: SpringModel, state: SpringState, colliders=None):
-    n, dtype = model.node_count, model.dtype
-    X, V = state.node_pos, state.node_vel
-    pinned, ps, pt = model.node_pinned, model.pin_start, model.pin_target
-    has_colliders = colliders is not None and colliders.count > 0
-    collide = colliders.make_func() if has_colliders else None
-    bad = ti.field(ti.i32, ())
-    bad[None] = NO_FAILURE
+@ti.func
+def pin_at(model: ti.template(), i, alpha):
+    return model.pin_start[i] + alpha * (model.pin_target[i] - model.pin_start[i])
 
-    @ti.func
-    def pin_at(i, alpha):
-        return ps[i] + alpha * (pt[i] - ps[i])
 
-    @ti.kernel
-    def pin_drive(alpha: dtype, h: dtype):
-        for i in range(n):
-            if pinned[i]:
-                V[i] = (pin_at(i, alpha) - X[i]) / h
+@ti.kernel
+def pin_drive(model: ti.template(), state: ti.template(), alpha: ti.f64, h: ti.f64):
+    X, V = ti.static(state.node_pos, state.node_vel)
+    for i in range(model.node_count):
+        if model.node_pinned[i]:
+            V[i] = (pin_at(model, i, ti.cast(alpha, model.dtype)) - X[i]) / ti.cast(h, model.dtype)
 
-    @ti.kernel
-    def finalize(alpha: dtype, k: ti.i32):
-        for i in range(n):
-            x, v = X[i], V[i]
-            if pinned[i]:
-                x = pin_at(i, alpha)
-            else:
-                if ti.static(has_colliders):
-                    xc, vc, killed, hits = collide(ti.cast(x, ti.f32), ti.cast(v, ti.f32))
-                    if hits > 0:
-                        x = ti.cast(xc, dtype)
-                        v = ti.cast(vc, dtype)
-            if not is_finite(x.sum() + v.sum()):
-                ti.atomic_min(bad[None], k)
-            X[i] = x
-            V[i] = v
 
-    @ti.kernel
-    def begin_frame():
-        for i in range(n):
-            if pinned[i]:
-                ps[i] = X[i]
+@ti.func
+def no_collision(x, v):
+    """``collide`` for a network without colliders (the compiler drops the dead branch)."""
+    return x, v, 0, 0
 
-    return dict(pin_drive=pin_drive, finalize=finalize, begin_frame=begin_frame, bad=bad)
+
+@ti.kernel
+def finalize(model: ti.template(), state: ti.template(), collide: ti.template(), bad_t: ti.template(),
+             alpha: ti.f64, t_end: ti.f64):
+    X, V = ti.static(state.node_pos, state.node_vel)
+    for i in range(model.node_count):
+        x, v = X[i], V[i]
+        if model.node_pinned[i]:
+            x = pin_at(model, i, ti.cast(alpha, model.dtype))
+        else:
+            xc, vc, killed, hits = collide(ti.cast(x, ti.f32), ti.cast(v, ti.f32))
+            if hits > 0:
+                x = ti.cast(xc, model.dtype)
+                v = ti.cast(vc, model.dtype)
+        if not is_finite(x.sum() + v.sum()):
+            ti.atomic_min(bad_t[None], t_end)
+        X[i] = x
+        V[i] = v
+
+
+@ti.kernel
+def begin_frame(model: ti.template(), state: ti.template()):
+    """Pinned nodes start the frame where they are."""
+    for i in range(model.node_count):
+        if model.node_pinned[i]:
+            model.pin_start[i] = state.node_pos[i]

@@ -9,66 +9,70 @@ acceleration, not even gravity.
 * atomic: one pass over springs adding f·w_a to a and −f·w_b to b with float atomics; the
   summation order depends on thread timing, so the last bits may differ between runs.
 
-Both kernels write ``A[j, i]`` (j selects a stage slot) for states held in the template fields X, V.
+Both kernels write ``A[j, i]`` (j selects an evaluation slot of the stepper) for the state held in
+the fields X, V; ``gravity`` is the control's 0-d field.
 """
 import taichi as ti
-
-from .model import SpringModel
 
 ACCUMULATORS = ("gather", "atomic")
 
 
-def make_spring_force(model: SpringModel):
-    """``spring_force(X, V, s)``: the force on end a of spring s (end b receives its negative)."""
-    sa, sb, rl = model.spring_a, model.spring_b, model.spring_rest_length
-    ks, kd, dtype = model.spring_ks, model.spring_kd, model.dtype
-
-    @ti.func
-    def spring_force(X, V, s):
-        a, b = sa[s], sb[s]
-        L = X[a] - X[b]
-        ln = L.norm()
-        f = ti.Vector.zero(dtype, 3)
-        if ln > 1e-12:
-            n = L / ln
-            f = -(ks[s] * (ln - rl[s]) + kd[s] * (V[a] - V[b]).dot(n)) * n
-        return f
-
-    return spring_force
+@ti.func
+def spring_force(model: ti.template(), X: ti.template(), V: ti.template(), s):
+    """The force on end a of spring s (end b receives its negative)."""
+    a, b = model.spring_a[s], model.spring_b[s]
+    L = X[a] - X[b]
+    ln = L.norm()
+    f = ti.Vector.zero(model.dtype, 3)
+    if ln > 1e-12:
+        n = L / ln
+        f = -(model.spring_ks[s] * (ln - model.spring_rest_length[s])
+              + model.spring_kd[s] * (V[a] - V[b]).dot(n)) * n
+    return f
 
 
-def make_accel_kernels(model: SpringModel):
-    """Returns {"gather": kernel, "atomic": kernel}, each ``(X, V, A, j)`` writing A[j, i]."""
-    n, m, dtype = model.node_count, model.spring_count, model.dtype
-    spring_force = make_spring_force(model)
-    off, adj, sign = model.adj_offset, model.adj_spring, model.adj_sign
-    inv_mass, grav, sa, sb = model.node_inv_mass, model.gravity, model.spring_a, model.spring_b
+@ti.kernel
+def accel_gather(model: ti.template(), gravity: ti.template(), X: ti.template(), V: ti.template(),
+                 A: ti.template(), j: ti.i32):
+    g = ti.cast(gravity[None], model.dtype)
+    off, adj, sign = ti.static(model.adj_offset, model.adj_spring, model.adj_sign)
+    for i in range(model.node_count):
+        f = ti.Vector.zero(model.dtype, 3)
+        for e in range(off[i], off[i + 1]):
+            f += sign[e] * spring_force(model, X, V, adj[e])
+        w = model.node_inv_mass[i]
+        acc = w * f
+        if w > 0:
+            acc += g
+        A[j, i] = acc
 
-    @ti.kernel
-    def accel_gather(X: ti.template(), V: ti.template(), A: ti.template(), j: ti.i32):
-        g = grav[None]
-        for i in range(n):
-            f = ti.Vector.zero(dtype, 3)
-            for e in range(off[i], off[i + 1]):
-                f += sign[e] * spring_force(X, V, adj[e])
-            w = inv_mass[i]
-            acc = w * f
-            if w > 0:
-                acc += g
-            A[j, i] = acc
 
-    @ti.kernel
-    def accel_atomic(X: ti.template(), V: ti.template(), A: ti.template(), j: ti.i32):
-        g = grav[None]
-        for i in range(n):
-            acc = ti.Vector.zero(dtype, 3)
-            if inv_mass[i] > 0:
-                acc = g
-            A[j, i] = acc
-        for s in range(m):
-            f = spring_force(X, V, s)
-            a, b = sa[s], sb[s]
-            A[j, a] += inv_mass[a] * f
-            A[j, b] -= inv_mass[b] * f
+@ti.kernel
+def accel_atomic(model: ti.template(), gravity: ti.template(), X: ti.template(), V: ti.template(),
+                 A: ti.template(), j: ti.i32):
+    g = ti.cast(gravity[None], model.dtype)
+    w = ti.static(model.node_inv_mass)
+    for i in range(model.node_count):
+        acc = ti.Vector.zero(model.dtype, 3)
+        if w[i] > 0:
+            acc = g
+        A[j, i] = acc
+    for s in range(model.spring_count):
+        f = spring_force(model, X, V, s)
+        a, b = model.spring_a[s], model.spring_b[s]
+        A[j, a] += w[a] * f
+        A[j, b] -= w[b] * f
 
-    return {"gather": accel_gather, "atomic": accel_atomic}
+
+def accel_launcher(model, gravity, accumulate: str = "gather"):
+    """``accel(X, V, A, j)`` for the staged steppers (engine.ode.staged); nothing to do for an
+    empty network."""
+    if accumulate not in ACCUMULATORS:
+        raise ValueError(f"accumulate: unknown value {accumulate!r}; allowed: {', '.join(ACCUMULATORS)}")
+    kernel = accel_gather if accumulate == "gather" else accel_atomic
+
+    def accel(X, V, A, j):
+        if model.node_count:
+            kernel(model, gravity, X, V, A, j)
+
+    return accel

@@ -49,41 +49,43 @@ def limit_schedule(model: SpringModel):
     return sel[order].astype(np.int32), mode[order].astype(np.int32), ranges
 
 
+@ti.kernel
+def _project(model: ti.template(), state: ti.template(), lim_spring: ti.template(), lim_mode: ti.template(),
+             lo: ti.i32, hi: ti.i32, max_stretch: ti.f64):
+    X, V, w = ti.static(state.node_pos, state.node_vel, model.node_inv_mass)
+    sa, sb, rl = ti.static(model.spring_a, model.spring_b, model.spring_rest_length)
+    for q in range(lo, hi):
+        s, mode = lim_spring[q], lim_mode[q]
+        a, b = sa[s], sb[s]
+        wa, wb = w[a], w[b]
+        one, zero = ti.cast(1, model.dtype), ti.cast(0, model.dtype)
+        if mode == CHILD_B:
+            wa, wb = zero, ti.select(wb > 0, one, zero)
+        elif mode == CHILD_A:
+            wa, wb = ti.select(wa > 0, one, zero), zero
+        L = X[a] - X[b]
+        ln = L.norm()
+        cap = (1 + ti.cast(max_stretch, model.dtype)) * rl[s]
+        if ln > cap and wa + wb > 0:
+            nrm = L / ln
+            corr = (ln - cap) / (wa + wb) * nrm
+            X[a] -= wa * corr
+            X[b] += wb * corr
+            rel = (V[a] - V[b]).dot(nrm)
+            if rel > 0:
+                imp = rel / (wa + wb) * nrm
+                V[a] -= wa * imp
+                V[b] += wb * imp
+
+
 class DistanceLimits:
+    """The sweep schedule of a network's structural springs and its launcher."""
+
     def __init__(self, model: SpringModel, state: SpringState):
-        M, dtype = max(1, model.spring_count), model.dtype
-        self.model = model
-        self.lim_spring = lim_spring = ti.field(ti.i32, M)
-        self.lim_mode = lim_mode = ti.field(ti.i32, M)
-        X, V, w = state.node_pos, state.node_vel, model.node_inv_mass
-        sa, sb, rl = model.spring_a, model.spring_b, model.spring_rest_length
-
-        @ti.kernel
-        def project(lo: ti.i32, hi: ti.i32, max_stretch: dtype):
-            for q in range(lo, hi):
-                s, mode = lim_spring[q], lim_mode[q]
-                a, b = sa[s], sb[s]
-                wa, wb = w[a], w[b]
-                one, zero = ti.cast(1, dtype), ti.cast(0, dtype)
-                if mode == CHILD_B:
-                    wa, wb = zero, ti.select(wb > 0, one, zero)
-                elif mode == CHILD_A:
-                    wa, wb = ti.select(wa > 0, one, zero), zero
-                L = X[a] - X[b]
-                ln = L.norm()
-                cap = (1 + max_stretch) * rl[s]
-                if ln > cap and wa + wb > 0:
-                    nrm = L / ln
-                    corr = (ln - cap) / (wa + wb) * nrm
-                    X[a] -= wa * corr
-                    X[b] += wb * corr
-                    rel = (V[a] - V[b]).dot(nrm)
-                    if rel > 0:
-                        imp = rel / (wa + wb) * nrm
-                        V[a] -= wa * imp
-                        V[b] += wb * imp
-
-        self._project = project
+        M = max(1, model.spring_count)
+        self.model, self.state = model, state
+        self.lim_spring = ti.field(ti.i32, M)
+        self.lim_mode = ti.field(ti.i32, M)
         self.refresh()
 
     def refresh(self) -> None:
@@ -97,4 +99,4 @@ class DistanceLimits:
     def apply(self, max_stretch: float, passes: int) -> None:
         for _ in range(passes):
             for lo, hi in self.ranges:
-                self._project(lo, hi, max_stretch)
+                _project(self.model, self.state, self.lim_spring, self.lim_mode, lo, hi, max_stretch)

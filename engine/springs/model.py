@@ -41,6 +41,7 @@ def edge_coloring(n_nodes: int, edges: np.ndarray):
     return colors, int(colors.max()) + 1 if len(colors) else 0
 
 
+@ti.data_oriented
 class SpringModel:
     """Fields (dtype is f32 for the engine; f64 for tests):
 
@@ -48,10 +49,11 @@ class SpringModel:
     (where a pinned node is at the start / end of the current frame); spring_a, spring_b,
     spring_rest_length, spring_ks, spring_kd;
     adj_offset, adj_spring, adj_sign; color_spring (springs grouped by colour, ranges in
-    color_ranges); gravity (0-d vector, m/s²).
+    color_ranges). Passed to the module-level kernels as a template argument (its counts are
+    compile-time constants there). Gravity is an input (engine.control), not part of the model.
     """
 
-    def __init__(self, top: Topology, dtype=ti.f32, gravity=(0.0, -9.81, 0.0)):
+    def __init__(self, top: Topology, dtype=ti.f32):
         self.top, self.dtype = top, dtype
         self.node_count = n = top.node_count
         self.spring_count = m = top.spring_count
@@ -70,8 +72,6 @@ class SpringModel:
         self.adj_spring = ti.field(ti.i32, 2 * M)
         self.adj_sign = ti.field(dtype, 2 * M)
         self.color_spring = ti.field(ti.i32, M)
-        self.gravity = ti.Vector.field(3, dtype, ())
-        self.gravity[None] = list(map(float, gravity))
 
         npd = np.float64 if dtype == ti.f64 else np.float32
         pad = lambda a, size, t: np.concatenate([np.asarray(a, t), np.zeros(size - len(a), t)])  # noqa: E731
@@ -115,6 +115,7 @@ class SpringModel:
         return self.top.masses[~self.pinned_mask]
 
 
+@ti.data_oriented
 class SpringState:
     """node_pos (m) and node_vel (m/s), one vector per node."""
 

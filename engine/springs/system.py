@@ -5,11 +5,13 @@
         sys.step(1 / 60)                        # sub-steps internally, lands exactly on the frame
         draw(sys.positions(), sys.triangles())
 
-Integrators: the five names of engine.ode.steppers.METHODS (explicit, stage by stage) and "xpbd"
-(stable at h = 1/60 for stiff springs). ``substeps``: None (one step per frame, or frame/h when
-``h`` is given), an int, or "auto" (from the stiffness guard). Explicit steps beyond the stability
-limit raise :class:`StiffnessError` unless ``check_stability=False``. ``adaptive=True`` uses step
-doubling with the tolerances. A non-finite state raises :class:`SimulationDiverged`, naming the
+Integrators: the names of engine.ode's :data:`~engine.ode.methods.INTEGRATORS`, staged over the
+network's fields by :class:`~engine.ode.staged.FieldStepper`, and "xpbd" (stable at h = 1/60 for
+stiff springs). ``substeps``: None (one step per frame, or frame/h when ``h`` is given), an int,
+or "auto" (from the stiffness guard). Explicit steps beyond the stability limit raise
+:class:`StiffnessError` unless ``check_stability=False``. ``adaptive=True`` uses step doubling with
+the tolerances. The steps are taken by the ODE core's :class:`~engine.ode.driver.Driver` (this
+class implements its protocol); a non-finite state raises :class:`SimulationDiverged`, naming the
 integrator, h and the simulated time.
 """
 import math
@@ -17,26 +19,22 @@ import math
 import numpy as np
 import taichi as ti
 
-from ..ode.controller import StepDoublingController, clip_to_target
-from ..ode.steppers import METHODS
-from ..runtime import check_stop, ensure_init
-from .adaptive import DoublingBuffers
-from .constraints import NO_FAILURE, make_constraint_kernels
+from ..control import ColliderInput, Control
+from ..ode.driver import Driver, SimulationDiverged, StepPolicy
+from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
+from ..ode.staged import FieldStepper, StagedDoubling
+from ..runtime import ensure_init
+from . import constraints
 from .energy import network_energy
-from .forces import ACCUMULATORS, make_accel_kernels
-from .integrators import ExplicitStepper
+from .forces import ACCUMULATORS, accel_launcher
 from .limits import DistanceLimits
 from .model import SpringModel, SpringState
 from .stability import SAFETY, StiffnessError, auto_substeps, check_step, network_bounds, stable_step
 from .topology import STRUCTURAL, Topology, surface_lines
 from .xpbd import XPBDStepper
 
-INTEGRATORS = tuple(METHODS) + ("xpbd",)
+INTEGRATORS = ODE_INTEGRATORS + (XPBDStepper.method,)
 __all__ = ["SpringSystem", "SimulationDiverged", "StiffnessError", "INTEGRATORS"]
-
-
-class SimulationDiverged(RuntimeError):
-    """The state became non-finite (or the adaptive step collapsed)."""
 
 
 class SpringSystem:
@@ -45,7 +43,9 @@ class SpringSystem:
                  tol: float = 1e-4, rtol=None, atol=None, accumulate: str = "gather",
                  xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 2,
                  check_stability: bool = True, dtype=ti.f32, record_energy: bool = False,
-                 move_colliders=None):
+                 control: Control = None, name: str = ""):
+        """``control``: the scene's inputs (gravity, collider positions); without one the system
+        has its own, with ``gravity`` and the colliders' own paths. ``name`` prefixes messages."""
         ensure_init()
         if integrator not in INTEGRATORS:
             raise ValueError(f"integrator: unknown value {integrator!r}; allowed: {', '.join(INTEGRATORS)}")
@@ -56,33 +56,39 @@ class SpringSystem:
         if adaptive and integrator == "xpbd":
             raise ValueError("adaptive: step doubling needs an explicit integrator, not 'xpbd'")
         self.top, self.dtype, self.integrator = topology, dtype, integrator
+        self.method, self.label = integrator, f"{name}: {integrator}" if name else integrator
         self.h, self.substeps, self.adaptive = h, substeps, adaptive
         self.rtol = tol if rtol is None else rtol
         self.atol = self.rtol if atol is None else atol
         self.max_stretch, self.limit_iterations = max_stretch, limit_iterations
         self.check_stability, self.record_energy = check_stability, record_energy
-        self.model = SpringModel(topology, dtype, gravity)
+        if control is None:  # standalone: its own inputs, the colliders following their specs' paths
+            specs = colliders.specs if colliders is not None else ()
+            control = Control(gravity, colliders=[ColliderInput.from_spec(s) for s in specs], dtype=dtype)
+        self.control = control
+        self.gravity = self.control.gravity
+        self.model = SpringModel(topology, dtype)
         self.state = SpringState(topology.node_count, dtype)
         self.set_positions(topology.positions)
         self.set_velocities(np.zeros_like(topology.positions))
-        self.accel = make_accel_kernels(self.model)[accumulate]
+        n = topology.node_count
         if integrator == "xpbd":
-            self.stepper = XPBDStepper(self.model, self.state, xpbd_iterations)
+            self.stepper = XPBDStepper(self.model, self.state, self.gravity, xpbd_iterations)
         else:
-            self.stepper = ExplicitStepper(self.model, self.state, self.accel, integrator)
+            self.accel = accel_launcher(self.model, self.gravity, accumulate)
+            self.stepper = FieldStepper(integrator, self.state.node_pos, self.state.node_vel, n, self.accel)
+        self.order = self.stepper.order
         self.colliders = colliders
-        if move_colliders is None:
-            move_colliders = colliders is not None and any(s.path for s in colliders.specs)
-        self.move_colliders = move_colliders
-        self._c = make_constraint_kernels(self.model, self.state, colliders)
+        self._collide = (colliders.make_func() if colliders is not None and colliders.count
+                         else constraints.no_collision)
+        self._bad = ti.field(ti.f64, ())
+        self._bad[None] = constraints.NO_FAILURE
         self._limits = DistanceLimits(self.model, self.state) if max_stretch is not None else None
-        self._buf = DoublingBuffers(self.model, self.state) if adaptive else None
-        self._ctrl = StepDoublingController(order=self.stepper.order, max_factor=5.0)
-        self._h_next = None
+        self._doubling = StagedDoubling(self.stepper) if adaptive else None
+        self.driver = Driver(self, StepPolicy(adaptive=adaptive, rtol=self.rtol, atol=self.atol))
         self.bounds = network_bounds(topology, self.model.pinned_mask)
         self.time = 0.0
-        self.step_sizes = []  # h of every accepted step in the last frame
-        self.n_rejected = 0
+        self._frame = (0.0, 1.0)  # (start, length) of the frame being stepped: pins move over it
         self.energy_log = []
 
     # -- stepping ---------------------------------------------------------------------------------
@@ -101,79 +107,72 @@ class SpringSystem:
         """Advance by dt seconds (a frame of any length), landing exactly on time + dt."""
         if not dt > 0:
             raise ValueError(f"dt: must be positive, got {dt}")
-        self._c["begin_frame"]()
-        if self.adaptive:
-            self._step_adaptive(dt)
-        else:
-            self._step_fixed(dt)
+        if self.model.node_count:
+            constraints.begin_frame(self.model, self.state)
+        if not self.adaptive:
+            n = self.substeps_for(dt)
+            if self.check_stability and self.integrator != "xpbd" and self.substeps != "auto":
+                check_step(self.integrator, dt / n, self.bounds, dt)
+            self.driver.policy.h = dt / n
+        self._frame = (self.time, dt)
+        self.driver.advance(self.time, self.time + dt)
         self.time += dt
         if self.record_energy:
             self.energy_log.append(self.energy())
 
-    def _step_fixed(self, dt: float) -> None:
-        n = self.substeps_for(dt)
-        h = dt / n
-        if self.check_stability and self.integrator != "xpbd" and self.substeps != "auto":
-            check_step(self.integrator, h, self.bounds, dt)
-        for k in range(n):
-            check_stop()
-            self._advance(h, (k + 1) / n)
-            self._post((k + 1) / n, k, self.time + (k + 1) * h)
-        self.step_sizes = [h] * n
-        self._raise_if_bad(lambda k: (h, self.time + (k + 1) * h))
+    @property
+    def step_sizes(self) -> list:
+        """h of every accepted step in the last frame."""
+        return self.driver.step_sizes
 
-    def _advance(self, h: float, alpha_end: float) -> None:
+    @property
+    def n_rejected(self) -> int:
+        return self.driver.stats.rejected
+
+    # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
+    def _alpha(self, t: float) -> float:
+        t0, dt = self._frame
+        return (t - t0) / dt
+
+    def _drive_pins(self, h: float, t_end: float) -> None:
         if self.model.pinned_mask.any():
-            self._c["pin_drive"](alpha_end, h)
-        self.stepper.step(h)
+            constraints.pin_drive(self.model, self.state, self._alpha(t_end), h)
 
-    def _post(self, alpha: float, k: int, t_end: float) -> None:
+    def _post(self, t_end: float) -> None:
+        if self.model.node_count == 0:
+            return
         if self._limits is not None:
             self._limits.apply(self.max_stretch, self.limit_iterations)
-        if self.move_colliders:
-            self.colliders.move_to(t_end)
-        self._c["finalize"](alpha, k)
+        if self.colliders is not None and self.colliders.count and self.control.colliders_move:
+            self.colliders.move_to(t_end, self.control.collider_positions(t_end))
+        constraints.finalize(self.model, self.state, self._collide, self._bad, self._alpha(t_end), t_end)
 
-    def _raise_if_bad(self, where) -> None:
-        bad = self._c["bad"]
-        k = int(bad[None])
-        if k != NO_FAILURE:
-            bad[None] = NO_FAILURE
-            h, t = where(k)
-            raise SimulationDiverged(f"{self.integrator} diverged: non-finite state at t = {t:.6g} s "
-                                     f"with h = {h:.3g} s")
+    def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
+        t = t0 + j * h
+        self._drive_pins(h, t + h)
+        self.stepper.step(h)
+        self._post(t + h)
+        return 1
 
-    def _step_adaptive(self, dt: float) -> None:
-        buf, ctrl, order = self._buf, self._ctrl, self.stepper.order
-        h = self._h_next or min(dt, SAFETY * self.stable_step())
-        t, k, sizes = 0.0, 0, []
-        while t < dt:
-            check_stop()
-            hs, lands = clip_to_target(t, h, dt)
-            buf.save()
-            self._advance(hs, (t + hs) / dt)
-            buf.keep_single()
-            buf.restore()
-            self._advance(hs / 2, (t + hs / 2) / dt)
-            self._advance(hs / 2, (t + hs) / dt)
-            err = buf.error(order, self.atol, self.rtol)
-            accept, h_new = ctrl.propose(hs, err)
-            if accept:
-                t = dt if lands else t + hs
-                self._post(t / dt, k, self.time + t)
-                sizes.append(hs)
-                k += 1
-            else:
-                buf.restore()
-                self.n_rejected += 1
-                if h_new < ctrl.h_min or not math.isfinite(h_new):
-                    raise SimulationDiverged(f"{self.integrator} diverged: adaptive step fell to "
-                                             f"h = {h_new:.3g} s at t = {self.time + t:.6g} s (err = {err:.3g})")
-            h = h_new
-        self.step_sizes = sizes
-        self._h_next = h
-        starts = np.concatenate([[0.0], np.cumsum(sizes)])
-        self._raise_if_bad(lambda j: (sizes[j], self.time + starts[j + 1]))
+    def first_nonfinite(self):
+        t = float(self._bad[None])
+        if t >= constraints.NO_FAILURE:
+            return None
+        self._bad[None] = constraints.NO_FAILURE
+        return t
+
+    def attempt(self, t: float, h: float) -> float:
+        return self._doubling.attempt(h, self.atol, self.rtol,
+                                      before=lambda hs, end: self._drive_pins(hs, t + end * h))
+
+    def commit(self, t: float, h: float) -> None:
+        self._post(t + h)
+
+    def rollback(self) -> None:
+        self._doubling.rollback()
+
+    def first_step(self, t: float, t_end: float) -> float:
+        return min(t_end - t, SAFETY * self.stable_step())
 
     # -- state, pins, energy, render data ---------------------------------------------------------
     def _np(self, a) -> np.ndarray:
@@ -220,9 +219,19 @@ class SpringSystem:
             self.pin(node)
         self.model.pin_target[node] = [float(c) for c in pos]
 
+    def apply(self, requests) -> None:
+        """Pin requests from the control (:class:`~engine.control.PinRequest`), in order."""
+        for r in requests:
+            if r.kind == "release":
+                self.release(r.node)
+            elif r.kind == "move":
+                self.set_pin_target(r.node, r.target)
+            else:
+                self.pin(r.node, r.target)
+
     def energy(self) -> dict:
         e = network_energy(self.top, self.model.pinned_mask, self.positions(), self.velocities(),
-                           self.model.gravity[None].to_numpy())
+                           self.gravity[None].to_numpy())
         return dict(t=self.time, **e)
 
     def lines(self, kinds=(STRUCTURAL,)) -> np.ndarray:

@@ -14,65 +14,76 @@ than ks (sagging), never exploding. Springs with ks = 0 are skipped.
 """
 import taichi as ti
 
-from .model import SpringModel, SpringState
+
+@ti.kernel
+def _predict(model: ti.template(), state: ti.template(), gravity: ti.template(), x_prev: ti.template(),
+             lam: ti.template(), h: ti.f64):
+    X, V, w = ti.static(state.node_pos, state.node_vel, model.node_inv_mass)
+    hh = ti.cast(h, model.dtype)
+    g = ti.cast(gravity[None], model.dtype)
+    for i in range(model.node_count):
+        v = V[i]
+        if w[i] > 0:
+            v += hh * g
+        V[i] = v
+        x_prev[i] = X[i]
+        X[i] += hh * v
+    for s in range(model.spring_count):
+        lam[s] = 0
+
+
+@ti.kernel
+def _project_color(model: ti.template(), state: ti.template(), x_prev: ti.template(), lam: ti.template(),
+                   lo: ti.i32, hi: ti.i32, h: ti.f64):
+    X, w = ti.static(state.node_pos, model.node_inv_mass)
+    sa, sb, rl, ks, kd = ti.static(model.spring_a, model.spring_b, model.spring_rest_length,
+                                   model.spring_ks, model.spring_kd)
+    hh = ti.cast(h, model.dtype)
+    for q in range(lo, hi):
+        s = model.color_spring[q]
+        a, b = sa[s], sb[s]
+        wa, wb = w[a], w[b]
+        if ks[s] > 0 and wa + wb > 0:
+            L = X[a] - X[b]
+            ln = L.norm()
+            if ln > 1e-12:
+                nrm = L / ln
+                alpha = 1 / (ks[s] * hh * hh)
+                gamma = kd[s] / (ks[s] * hh)
+                C = ln - rl[s]
+                dC = nrm.dot((X[a] - x_prev[a]) - (X[b] - x_prev[b]))
+                dlam = (-C - alpha * lam[s] - gamma * dC) / ((1 + gamma) * (wa + wb) + alpha)
+                lam[s] += dlam
+                X[a] += wa * dlam * nrm
+                X[b] -= wb * dlam * nrm
+
+
+@ti.kernel
+def _update_velocity(model: ti.template(), state: ti.template(), x_prev: ti.template(), h: ti.f64):
+    hh = ti.cast(h, model.dtype)
+    for i in range(model.node_count):
+        state.node_vel[i] = (state.node_pos[i] - x_prev[i]) / hh
 
 
 class XPBDStepper:
+    """``step(h)``: one XPBD step of the network (fixed steps only: no error estimate)."""
+
     method = "xpbd"
     order = 1
     fevals = 1
 
-    def __init__(self, model: SpringModel, state: SpringState, iterations: int = 10):
-        n, m, dtype, N, M = model.node_count, model.spring_count, model.dtype, max(1, model.node_count), max(1, model.spring_count)
-        self.model, self.state, self.iterations = model, state, int(iterations)
-        self.x_prev = x_prev = ti.Vector.field(3, dtype, N)
-        self.lam = lam = ti.field(dtype, M)
-        X, V, w, g = state.node_pos, state.node_vel, model.node_inv_mass, model.gravity
-        sa, sb, rl, ks, kd, order = (model.spring_a, model.spring_b, model.spring_rest_length,
-                                     model.spring_ks, model.spring_kd, model.color_spring)
-
-        @ti.kernel
-        def predict(h: dtype):
-            for i in range(n):
-                v = V[i]
-                if w[i] > 0:
-                    v += h * g[None]
-                V[i] = v
-                x_prev[i] = X[i]
-                X[i] += h * v
-            for s in range(m):
-                lam[s] = 0
-
-        @ti.kernel
-        def project_color(lo: ti.i32, hi: ti.i32, h: dtype):
-            for q in range(lo, hi):
-                s = order[q]
-                a, b = sa[s], sb[s]
-                wa, wb = w[a], w[b]
-                if ks[s] > 0 and wa + wb > 0:
-                    L = X[a] - X[b]
-                    ln = L.norm()
-                    if ln > 1e-12:
-                        nrm = L / ln
-                        alpha = 1 / (ks[s] * h * h)
-                        gamma = kd[s] / (ks[s] * h)
-                        C = ln - rl[s]
-                        dC = nrm.dot((X[a] - x_prev[a]) - (X[b] - x_prev[b]))
-                        dlam = (-C - alpha * lam[s] - gamma * dC) / ((1 + gamma) * (wa + wb) + alpha)
-                        lam[s] += dlam
-                        X[a] += wa * dlam * nrm
-                        X[b] -= wb * dlam * nrm
-
-        @ti.kernel
-        def update_velocity(h: dtype):
-            for i in range(n):
-                V[i] = (X[i] - x_prev[i]) / h
-
-        self._predict, self._project, self._update = predict, project_color, update_velocity
+    def __init__(self, model, state, gravity, iterations: int = 10):
+        dtype, N, M = model.dtype, max(1, model.node_count), max(1, model.spring_count)
+        self.model, self.state, self.gravity, self.iterations = model, state, gravity, int(iterations)
+        self.x_prev = ti.Vector.field(3, dtype, N)
+        self.lam = ti.field(dtype, M)
 
     def step(self, h: float) -> None:
-        self._predict(h)
+        m, s = self.model, self.state
+        if m.node_count == 0:
+            return
+        _predict(m, s, self.gravity, self.x_prev, self.lam, h)
         for _ in range(self.iterations):
-            for lo, hi in self.model.color_ranges:
-                self._project(lo, hi, h)
-        self._update(h)
+            for lo, hi in m.color_ranges:
+                _project_color(m, s, self.x_prev, self.lam, lo, hi, h)
+        _update_velocity(m, s, self.x_prev, h)

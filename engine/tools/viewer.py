@@ -111,7 +111,7 @@ def run_viewer(make_scene, title: str, frames: int | None = None, screenshot: st
             scene.step(scene.scene.frame_dt)
         scene.render(W, H, show_colliders=show_colliders, out=frame, bgra=True)
         fps = 0.9 * fps + 0.1 / max(dt, 1e-6) if shown else 1.0 / max(dt, 1e-6)
-        draw_text(frame, f"{fps:5.1f} fps   {scene.scene.stats.alive:,} particles   t={scene.time:5.2f} s"
+        draw_text(frame, f"{fps:5.1f} fps   {scene.live_count():,} particles   t={scene.time:5.2f} s"
                          f"{'   [paused]' if paused else ''}")
         shown += 1
         if shown == WARM_FRAMES:

@@ -84,7 +84,7 @@ def run(quick: bool = False, configs=None):
         cfg = scene.cfg
         warm = 0.2 if quick else min(2.0, 0.5 * cfg.frame_count / cfg.fps)
         total, step, draw = time_frames(scene, w, h, frames, warm)
-        live = scene.scene.stats.alive if scene.scene.particles is not None else 0
+        live = scene.live_count()
         fps = 1e3 / total
         rows.append(Row(sec, name, fps, "frames/s",
                         f"{total:6.2f} ms = step {step:5.2f} + render {draw:6.2f}; live {live:,}; "

@@ -102,7 +102,7 @@ def run(quick: bool = False):
     t_render = time_median(lambda: R.render(cam, w, h, out=out), repeats, warmup=0)
     t_redraw = time_median(redraw, repeats, warmup=0)
     t = R.targets(w, h)
-    live = int(scene.particles.count_alive())
+    live = scene.live_count()
     label = f"{n / 1e6:g}M" if n >= 1_000_000 else f"{n // 1000}k"
     sec = f"full frame, {label} live particles at {w}x{h}"
     return [

@@ -34,7 +34,7 @@ def main(n=128):
           f"(ks = 1e4 structural/shear, 1e3 bend, kd = 0.01, m = 0.01)")
     for acc in ("gather", "atomic"):
         s = SpringSystem(top, integrator="symplectic_euler", substeps="auto", accumulate=acc)
-        A = s.stepper.A
+        A = s.stepper.a
         ms = _median_ms(lambda: s.accel(s.state.node_pos, s.state.node_vel, A, 0), 7, 20)
         print(f"force evaluation, {acc}: {ms:.3f} ms")
     s = SpringSystem(top, integrator="symplectic_euler", substeps="auto")

@@ -101,6 +101,7 @@ class NumpyStep:
 
 
 def measure(n: int, repeats: int):
+    from ...particles import integrate
     from . import kernels
 
     scene = build_engine_scene(n)
@@ -108,8 +109,8 @@ def measure(n: int, repeats: int):
     S = P.state
     npst = NumpyStep(n)
     t_engine = time_median(lambda: scene.advance(H), repeats, warmup=2)
-    t_kernel = time_median(lambda: P.integrator.step_fixed(scene.t, H), repeats, warmup=1)
-    alive = int(P.integrator.count_alive())
+    t_kernel = time_median(lambda: integrate.step_fixed(P.integrator, scene.t, H), repeats, warmup=1)
+    alive = P.count_alive()
     t_np = time_median(npst.step, max(3, repeats // 3), warmup=1, taichi=False)
     t_bw = time_median(lambda: kernels.stream_rmw(S.particle_pos, S.particle_vel, S.particle_age,
                                                   S.particle_life, 1.0, 0.0), repeats, warmup=2)

@@ -10,10 +10,8 @@ from typing import List
 import numpy as np
 import taichi as ti
 
-from ...ode import solve
+from ...ode import INTEGRATORS as METHODS, solve
 from ..problems import OSCILLATOR
-
-METHODS = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]
 H = 1.0 / 64  # exactly representable; hω = 1/32 on the oscillator, hω_max < 1/32 on the chain
 STEPS, QUICK_STEPS = 10000, 2000
 EVERY = 10  # output every EVERY steps

@@ -13,9 +13,9 @@ import time
 import numpy as np
 
 from .. import CONFIGS
-from ...ode.steppers import METHODS, doubling_fevals
+from ...ode import INTEGRATORS, METHODS
 
-FIXED = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]
+FIXED = INTEGRATORS
 
 
 def _sparks_run(overrides, seconds):
@@ -54,7 +54,7 @@ def sparks_rows(quick=False):
     for tol in ([1e-3] if quick else [1e-2, 1e-3, 1e-4, 1e-5]):
         add("rk4", "adaptive", tol, {"solver.integrator": "rk4", "solver.adaptive": True,
                                      "solver.tolerance": tol, "solver.h": 1 / 60},
-            doubling_fevals("rk4"))
+            METHODS["rk4"].doubling_fevals)
     return rows
 
 
@@ -64,7 +64,7 @@ def cloth_rows(quick=False):
     n, T = (8, 0.3) if quick else (16, 1.0)
     top = lambda: cloth(n, n, size=(1.0, 1.0), plane="xy", ks=1e3, kd=0.01, mass=0.01, pin="corners")  # noqa: E731
 
-    from ...springs import SimulationDiverged
+    from ...ode import SimulationDiverged
 
     def run(method, h):
         s = SpringSystem(top(), integrator=method, h=h, check_stability=False)

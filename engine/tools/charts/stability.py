@@ -3,9 +3,10 @@ from typing import List
 
 import numpy as np
 
+from ...ode import INTEGRATORS
 from ...ode.stability import largest_stable_h_batch, numerics_formula, theory_limit
 
-METHODS = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]
+METHODS = INTEGRATORS
 KDS = (0.0, 1.0, 20.0)
 FULL_KS = tuple(float(v) for v in np.logspace(1, 5, 9))  # 10 … 1e5, two points per decade
 QUICK_KS = (10.0, 1e3, 1e5)

@@ -14,13 +14,12 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from ...ode import METHODS, solve
+from ...ode import INTEGRATORS, METHODS, solve
 from ..problems import DAMPED_SPRING, DRAG, KEPLER, LOTKA_VOLTERRA, Problem
 
 FIELDS = ["problem", "method", "mode", "h_or_tol", "nfev", "wall_s", "error"]
-FIXED_METHODS = ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"]
-ADAPTIVE = [("euler", False), ("midpoint", False), ("rk4", False), ("rk4", True),
-            ("symplectic_euler", False), ("verlet", False)]
+FIXED_METHODS = list(INTEGRATORS)
+ADAPTIVE = [(m, False) for m in INTEGRATORS] + [("rk4", True)]  # (method, local extrapolation)
 SCIPY_METHODS = ["RK45", "DOP853"]
 
 

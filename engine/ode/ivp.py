@@ -1,9 +1,10 @@
-"""``solve``: a scipy-like driver for any ODE y' = f(y, t) written as a Taichi function.
+"""``solve`` (initial value problems): a scipy-like front end for any ODE y' = f(y, t) written as a Taichi function.
 
-The same steppers and controller serve the particle engine; this driver is the small-state path
-(Lotka–Volterra, x' = −kx, reference problems for charts and tests). The state is one
-``ti.Vector`` of length n held in a 0-d field; fixed-step runs loop inside one kernel, adaptive runs
-launch one kernel per attempt and let the Python controller decide.
+The small-state system (Lotka–Volterra, x' = −kx, the reference problems of charts and tests):
+the state is one ``ti.Vector`` of length n in a 0-d field, stepped by the same ``ti.func``
+steppers as the particles and advanced by the same :class:`~engine.ode.driver.Driver`. Fixed steps
+loop inside one kernel (one launch per output interval); adaptive runs launch one kernel per
+attempt and the driver's controller decides.
 """
 
 
@@ -15,8 +16,9 @@ import numpy as np
 import taichi as ti
 
 from ..runtime import ensure_init, on_reset
-from .controller import StepDoublingController, clip_to_target
-from .steppers import METHODS, doubling_fevals, doubling_step, is_finite, make_step, scaled_error
+from .driver import NONFINITE, STEP_TOO_SMALL as _TOO_SMALL, Driver, SimulationDiverged, StepPolicy
+from .methods import method as _method
+from .steppers import doubling_step, is_finite, make_step, scaled_error
 
 SUCCESS, DIVERGED, STEP_TOO_SMALL, TOO_MANY_STEPS = 0, -1, -2, -3
 
@@ -64,7 +66,7 @@ class _Kernels:
         def run_fixed(t0: dtype, h: dtype, nsteps: ti.i32) -> ti.i32:
             """Take up to nsteps steps of h; return how many ended finite."""
             done = 0
-            ti.loop_config(serialize=True)
+            ti.loop_config(serialize=True)  # one small state, step after step (not a per-frame kernel)
             for k in range(nsteps):
                 if done == k:
                     yn = step(y[None], t0 + k * h, h, 0)
@@ -90,26 +92,6 @@ class _Kernels:
 
         self.run_fixed, self.attempt, self.accept, self.deriv = run_fixed, attempt, accept, deriv
 
-    def initial_step(self, t0, t1, order, atol, rtol) -> float:
-        """Hairer, Nørsett & Wanner §II.4 starting step (as scipy's ``select_initial_step``):
-        h0 from |y|/|f|, refined by an estimate of the second derivative. Costs 2 evaluations."""
-        y0 = self.y[None].to_numpy().astype(np.float64)
-        self.deriv(t0)
-        f0 = self.cand[None].to_numpy().astype(np.float64)
-        scale = atol + rtol * np.abs(y0)
-        d0, d1 = np.max(np.abs(y0) / scale), np.max(np.abs(f0) / scale)
-        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-        h0 = min(h0, t1 - t0)
-        self.y[None] = (y0 + h0 * f0).tolist()
-        self.deriv(t0 + h0)
-        f1 = self.cand[None].to_numpy().astype(np.float64)
-        self.y[None] = y0.tolist()
-        d2 = np.max(np.abs(f1 - f0) / scale) / h0
-        if not np.isfinite(d2):
-            return h0
-        h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1.0 / (order + 1))
-        return float(min(100 * h0, h1, t1 - t0))
-
 
 _cache: dict = {}
 
@@ -126,6 +108,62 @@ def _kernels(f, method, n, dtype, extrapolate) -> _Kernels:
     if key not in _cache:
         _cache[key] = _Kernels(f, method, n, dtype, extrapolate)
     return _cache[key]
+
+
+class _SmallSystem:
+    """The driver's protocol over one small state. ``outputs``: when a list, (t, y) is appended
+    after every accepted step (solve without t_eval)."""
+
+    def __init__(self, K: _Kernels, method: str, order: int, atol: float, rtol: float, outputs=None):
+        self.K, self.method, self.label, self.order = K, method, method, order
+        self.atol, self.rtol, self.outputs = atol, rtol, outputs
+        self._bad = None
+
+    def y(self) -> np.ndarray:
+        return self.K.y[None].to_numpy().astype(np.float64)
+
+    def fixed_step(self, t0, h, j, n):
+        t = t0 + j * h
+        done = self.K.run_fixed(t, h, n - j)
+        if done < n - j and self._bad is None:
+            self._bad = t + (done + 1) * h
+        return n - j
+
+    def attempt(self, t, h):
+        return float(self.K.attempt(t, h, self.atol, self.rtol))
+
+    def commit(self, t, h):
+        self.K.accept()
+        if self.outputs is not None:
+            self.outputs.append((t + h, self.y()))
+
+    def rollback(self):
+        pass  # the trial sits in `cand` until accepted
+
+    def first_nonfinite(self):
+        bad, self._bad = self._bad, None
+        return bad
+
+    def first_step(self, t0, t1) -> float:
+        """Hairer, Nørsett & Wanner §II.4 starting step (as scipy's ``select_initial_step``):
+        h0 from |y|/|f|, refined by an estimate of the second derivative. Costs 2 evaluations."""
+        K, atol, rtol = self.K, self.atol, self.rtol
+        y0 = self.y()
+        K.deriv(t0)
+        f0 = K.cand[None].to_numpy().astype(np.float64)
+        scale = atol + rtol * np.abs(y0)
+        d0, d1 = np.max(np.abs(y0) / scale), np.max(np.abs(f0) / scale)
+        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h0 = min(h0, t1 - t0)
+        K.y[None] = (y0 + h0 * f0).tolist()
+        K.deriv(t0 + h0)
+        f1 = K.cand[None].to_numpy().astype(np.float64)
+        K.y[None] = y0.tolist()
+        d2 = np.max(np.abs(f1 - f0) / scale) / h0
+        if not np.isfinite(d2):
+            return h0
+        h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1.0 / (self.order + 1))
+        return float(min(100 * h0, h1, t1 - t0))
 
 
 def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
@@ -145,12 +183,13 @@ def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
     tol: turns on step doubling with rtol = atol = tol unless given separately.
     t_eval: output times (sorted, inside t_span). Steps land exactly on them. Default: the end
        points for fixed steps, every accepted step for adaptive runs.
+    h_min, max_steps: the driver gives up when a rejection would take h below h_min, or after
+       max_steps attempts in all.
     Returns an :class:`OdeResult`; divergence (a non-finite state) is a failed status whose message
     names the method, h and t — never NaNs handed back as a result.
     """
     ensure_init()
-    if method not in METHODS:
-        raise ValueError(f"method: unknown value {method!r}; allowed: {', '.join(METHODS)}")
+    meth = _method(method)
     y0 = np.asarray(y0, dtype=np.float64).ravel()
     n = y0.size
     t0, t1 = float(t_span[0]), float(t_span[1])
@@ -162,73 +201,46 @@ def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
     targets = [t1] if t_eval is None else [float(v) for v in t_eval]
     if any(b <= a for a, b in zip(targets, targets[1:])) or targets[0] < t0 or targets[-1] > t1:
         raise ValueError("t_eval: must be increasing and inside t_span")
-    meth = METHODS[method]
     K = _kernels(f, method, n, dtype, bool(extrapolate))
     K.y[None] = y0.tolist()
     ts, ys = ([t0], [y0.copy()]) if (t_eval is None or targets[0] == t0) else ([], [])
+    rt = tol if rtol is None else rtol
+    at = (tol if tol is not None else rt) if atol is None else atol
+    every_step = adaptive and t_eval is None
+    outputs = [] if every_step else None
+    system = _SmallSystem(K, method, meth.order, at, rt, outputs)
+    driver = Driver(system, StepPolicy(h=h, adaptive=adaptive, h_min=h_min))
     res = OdeResult(t=np.empty(0), y=np.empty((n, 0)))
-    t = t0
-    targets = [v for v in targets if v > t0]
+    if adaptive and not h:
+        res.nfev += 2  # the first-step estimate
+    per_step = (meth.doubling_fevals if (adaptive or extrapolate) else meth.fevals)
+    t, h_seen = t0, []
 
-    def fail(status, msg):
-        res.status, res.message = status, msg
+    def keep_outputs(upto):
+        ts.extend(p[0] for p in outputs[:upto])
+        ys.extend(p[1] for p in outputs[:upto])
+        outputs.clear()
 
-    if not adaptive:
-        for target in targets:
-            nsteps = max(1, math.ceil((target - t) / h - 1e-9))
-            hh = (target - t) / nsteps  # equal steps that land exactly on the target
-            done = K.run_fixed(t, hh, nsteps)
-            res.nfev += done * (doubling_fevals(method) if extrapolate else meth.fevals)
-            res.n_accepted += done
-            res.h_last = hh
-            if done < nsteps:
-                fail(DIVERGED, f"{method} diverged: non-finite state at t={t + (done + 1) * hh:.6g} "
-                               f"with h={hh:.6g}")
-                break
+    try:
+        for target in (v for v in targets if v > t0):
+            driver.advance(t, target, max_steps=max_steps - driver.stats.steps - driver.stats.rejected)
+            h_seen += driver.step_sizes
             t = target
+            if outputs is not None:
+                keep_outputs(-1)  # the last one is the target itself, appended next
             ts.append(t)
-            ys.append(K.y[None].to_numpy().astype(np.float64))
-    else:
-        rt = tol if rtol is None else rtol
-        at = (tol if tol is not None else rt) if atol is None else atol
-        ctrl = StepDoublingController(order=meth.order, h_min=h_min)
-        if h:
-            hh = h
-        else:
-            hh = K.initial_step(t0, t1, meth.order, at, rt)
-            res.nfev += 2
-        for target in targets:
-            while t < target and res.status == SUCCESS:
-                if res.n_accepted + res.n_rejected >= max_steps:
-                    fail(TOO_MANY_STEPS, f"{method}: gave up after {max_steps} steps at t={t:.6g}")
-                    break
-                hs, lands = clip_to_target(t, hh, target)
-                err = K.attempt(t, hs, at, rt)
-                res.nfev += doubling_fevals(method)
-                ok, h_new = ctrl.propose(hs, err)
-                if ok:
-                    K.accept()
-                    t = target if lands else t + hs
-                    res.n_accepted += 1
-                    res.h_last = hs
-                    res.h_history.append(hs)
-                    if t_eval is None and t < target:
-                        ts.append(t)
-                        ys.append(K.y[None].to_numpy().astype(np.float64))
-                    # a landing step was clipped: resume from the step the controller wanted
-                    hh = max(h_new, hh) if lands else h_new
-                else:
-                    res.n_rejected += 1
-                    hh = h_new
-                    if hh < h_min:
-                        kind = "non-finite error estimate" if not math.isfinite(err) else "error too large"
-                        fail(STEP_TOO_SMALL if math.isfinite(err) else DIVERGED,
-                             f"{method}: step size fell below h_min={h_min:g} at t={t:.6g} "
-                             f"(h={hs:.6g}, {kind}); the problem may be stiff or diverging")
-            if res.status != SUCCESS:
-                break
-            ts.append(t)
-            ys.append(K.y[None].to_numpy().astype(np.float64))
+            ys.append(system.y())
+    except SimulationDiverged as e:
+        h_seen += driver.step_sizes
+        if outputs is not None:
+            keep_outputs(None)
+        res.status = {NONFINITE: DIVERGED, _TOO_SMALL: STEP_TOO_SMALL}.get(e.kind, TOO_MANY_STEPS)
+        res.message = str(e)
+    st = driver.stats
+    res.n_accepted, res.n_rejected = st.steps, st.rejected
+    res.nfev += per_step * (st.steps + st.rejected)
+    res.h_history = h_seen if adaptive else []
+    res.h_last = h_seen[-1] if h_seen else math.nan
     res.t = np.asarray(ts)
     res.y = np.asarray(ys).T.reshape(n, len(ts))
     return res

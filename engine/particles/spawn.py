@@ -1,0 +1,168 @@
+"""Spawning kernels: new particles from emitters (one launch per step for all of them) and from
+sub-emitter events (a two-pass chunked prefix sum per link), all parallel and deterministic.
+
+Every random number is a hash of (seed, emitter, the particle's serial number), and slots and
+serial numbers are assigned by position, not by atomics: a run is reproducible and independent of
+thread count. Sub-emitter children take their slots in parent-slot order (the rank of their
+parent among the firing ones, from the prefix sum), as a serial pass would give them.
+"""
+import math
+
+import taichi as ti
+
+from .rng import rand01
+
+SHAPES = {"point": 0, "sphere": 1, "box": 2, "disc": 3, "cone": 4}
+TWO_PI = 2.0 * math.pi
+EVENT_DEATH, EVENT_COLLISION = 1, 2
+# plan rows of one spawn launch (engine.particles.emitters.Emitters.emit)
+R_E, R_K, R_FIRST, R_HEAD, R_SERIAL, R_START, R_SIZE = range(7)  # int columns
+V_TS0, V_TSPAN, V_PA, V_PB, V_T0, V_H, V_EV = 0, 1, 2, 5, 8, 9, 10  # float columns (vec3 take 3)
+A_HEAD, A_SERIAL, A_DROPPED, A_SIZE = range(4)  # per-emitter advance columns
+
+
+@ti.func
+def basis(n):
+    """Two unit vectors orthogonal to unit n."""
+    a = ti.Vector([1.0, 0.0, 0.0]) if ti.abs(n[0]) < 0.9 else ti.Vector([0.0, 1.0, 0.0])
+    u = n.cross(a).normalized()
+    return u, n.cross(u)
+
+
+@ti.func
+def init_particle(E: ti.template(), S: ti.template(), slot, e, sid, centre, base_vel):
+    """A new particle of emitter e in ``slot``: shape offset around ``centre``, direction within
+    the spread, speed in range, plus inherit × base_vel."""
+    r = ti.Vector([rand01(E.seed, e, sid, q) for q in ti.static(range(8))])
+    n = E.emitter_dir[e]
+    u, w = basis(n)
+    off = ti.Vector([0.0, 0.0, 0.0])
+    d = n
+    sh = E.emitter_shape[e]
+    radius = E.emitter_radius[e]
+    if sh == 1:  # sphere: volume or surface
+        z = 2.0 * r[1] - 1.0
+        phi = TWO_PI * r[2]
+        s = ti.sqrt(ti.max(0.0, 1.0 - z * z))
+        rr = radius * (1.0 if E.emitter_surface[e] != 0 else ti.pow(r[3], 1.0 / 3.0))
+        off = rr * ti.Vector([s * ti.cos(phi), s * ti.sin(phi), z])
+    elif sh == 2:  # box
+        off = (ti.Vector([r[1], r[2], r[3]]) - 0.5) * E.emitter_box[e]
+    elif sh == 3 or sh == 4:  # disc (and the cone's base), perpendicular to n
+        rr = radius * ti.sqrt(r[1])
+        phi = TWO_PI * r[2]
+        radial = ti.cos(phi) * u + ti.sin(phi) * w
+        off = rr * radial
+        if sh == 4 and radius > 0:  # cone: directions tilt outward with the offset
+            tilt = ti.acos(E.emitter_cos_spread[e]) * rr / radius
+            d = ti.cos(tilt) * n + ti.sin(tilt) * radial
+    dd = d
+    if sh != 4:  # uniform on the spherical cap of half-angle `spread` around d
+        cz = 1.0 - r[4] * (1.0 - E.emitter_cos_spread[e])
+        sz = ti.sqrt(ti.max(0.0, 1.0 - cz * cz))
+        phi2 = TWO_PI * r[5]
+        du, dw = basis(d)
+        dd = cz * d + sz * (ti.cos(phi2) * du + ti.sin(phi2) * dw)
+    speed = E.emitter_speed_min[e] + (E.emitter_speed_max[e] - E.emitter_speed_min[e]) * r[6]
+    S.particle_pos[slot] = centre + off
+    S.particle_vel[slot] = speed * dd + E.emitter_inherit[e] * base_vel
+    S.particle_age[slot] = 0.0
+    S.particle_life[slot] = E.emitter_life[e] * (1.0 - E.emitter_life_rand[e] * r[7])
+    S.particle_alive[slot] = 1
+    S.particle_emitter[slot] = e
+    S.particle_rand[slot] = rand01(E.seed, e, sid, 9)
+
+
+@ti.func
+def _vec(vals: ti.template(), r, c):
+    return ti.Vector([vals[r, c], vals[r, c + 1], vals[r, c + 2]])
+
+
+@ti.kernel
+def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i32, ndim=2),
+          vals: ti.types.ndarray(dtype=ti.f32, ndim=2), nrows: ti.i32, total: ti.i32,
+          adv: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+    """Write the ``total`` particles of the plan: row r spawns k of emitter e at ring offset
+    head + R_HEAD with serials from serial + R_SERIAL, born at stratified times in
+    [ts0, ts0 + tspan) and written at the emitter's position then, with age −(t_s − t0): the step
+    kernel advances them from their birth. A slot still alive is not overwritten: counted dropped.
+    Then every emitter's ring head, serial and dropped count advance by ``adv``."""
+    for q in range(total):
+        r = 0
+        while r + 1 < nrows and q >= rows[r + 1, R_FIRST]:
+            r += 1
+        e, k, j = rows[r, R_E], rows[r, R_K], q - rows[r, R_FIRST]
+        slot = rows[r, R_START] + (E.emitter_head[e] + rows[r, R_HEAD] + j) % rows[r, R_SIZE]
+        if S.particle_alive[slot] != 0:
+            ti.atomic_add(E.dropped[e], 1)  # the ring caught up with a live particle
+        else:
+            ti.atomic_add(E.emitter_emitted[e], 1)
+            sid = E.emitter_serial[e] + rows[r, R_SERIAL] + j
+            # stratified birth times across the span, so a stream has no gaps or clumps
+            jitter = rand01(E.seed, e, sid, 10)
+            ts = vals[r, V_TS0] + vals[r, V_TSPAN] * (ti.cast(j, ti.f32) + jitter) / ti.cast(k, ti.f32)
+            t0, h = vals[r, V_T0], vals[r, V_H]
+            a = 0.0
+            if h > 0:
+                a = ti.min(1.0, ti.max(0.0, (ts - t0) / h))
+            pa, pb = _vec(vals, r, V_PA), _vec(vals, r, V_PB)
+            init_particle(E, S, slot, e, sid, pa + a * (pb - pa), _vec(vals, r, V_EV))
+            S.particle_age[slot] = -ti.max(0.0, ts - t0)  # born this long into the step
+    for e in range(E.count):
+        if adv[e, A_SIZE] > 0:
+            E.emitter_head[e] = (E.emitter_head[e] + adv[e, A_HEAD]) % adv[e, A_SIZE]
+            E.emitter_serial[e] += adv[e, A_SERIAL]
+            E.dropped[e] += adv[e, A_DROPPED]
+
+
+@ti.func
+def _fires(S: ti.template(), i, bit, min_speed):
+    fire = (S.particle_event[i] & bit) != 0
+    if bit == EVENT_COLLISION:
+        fire = fire and S.particle_impact[i] >= min_speed
+    return fire
+
+
+@ti.kernel
+def count_events(S: ti.template(), counts: ti.template(), p_start: ti.i32, p_size: ti.i32,
+                 chunks: ti.i32, bit: ti.i32, min_speed: ti.f32):
+    """Pass 1: how many parents fire in each of ``chunks`` consecutive slices of the segment."""
+    size = (p_size + chunks - 1) // chunks
+    for q in range(chunks):
+        n = 0
+        for i in range(p_start + q * size, p_start + ti.min(p_size, (q + 1) * size)):
+            if _fires(S, i, bit, min_speed):
+                n += 1
+        counts[q] = n
+
+
+@ti.kernel
+def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), p_start: ti.i32,
+                   p_size: ti.i32, chunks: ti.i32, bit: ti.i32, min_speed: ti.f32, c: ti.i32,
+                   c_start: ti.i32, c_size: ti.i32, count: ti.i32):
+    """Pass 2: each slice adds up the counts before it (its parents' first rank) and walks its
+    parents in slot order; the n-th child of the pass takes ring slot head + n and serial
+    serial + n. A child that finds its slot alive, or that would wrap onto a slot this pass already
+    gave out (n ≥ ring size), is counted dropped."""
+    h0, s0 = E.emitter_head[c], E.emitter_serial[c]
+    size = (p_size + chunks - 1) // chunks
+    for q in range(chunks):
+        rank = 0
+        for m in range(q):
+            rank += counts[m]
+        for i in range(p_start + q * size, p_start + ti.min(p_size, (q + 1) * size)):
+            if _fires(S, i, bit, min_speed):
+                for j in range(count):
+                    n = rank * count + j
+                    slot = c_start + (h0 + n) % c_size
+                    if n >= c_size or S.particle_alive[slot] != 0:
+                        ti.atomic_add(E.dropped[c], 1)
+                    else:
+                        ti.atomic_add(E.emitter_emitted[c], 1)
+                        init_particle(E, S, slot, c, s0 + n, S.particle_pos[i], S.particle_vel[i])
+                rank += 1
+    total = 0
+    for q in range(chunks):
+        total += counts[q]
+    E.emitter_head[c] = (h0 + total * count) % c_size
+    E.emitter_serial[c] = s0 + total * count

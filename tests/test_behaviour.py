@@ -1,0 +1,101 @@
+"""Behaviour kept: what the simulation did when the fixtures were recorded (tests/make_behaviour.py).
+
+The particles of shipped configs after a few frames (slots and emitters exactly, positions,
+velocities and ages to float32 rounding), fixed-step cloths, and the step-size sequences of an
+adaptive particle scene and an adaptive cloth. A refactor of the stepping code must leave these
+alone; a change of policy re-records them on purpose (and says so in its commit).
+"""
+import os
+
+import numpy as np
+import pytest
+
+from behaviour_scenes import FRAME_SHOTS, adaptive_cloth, adaptive_particles, fixed_cloths, particle_frames
+
+HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "behaviour")
+TOL = dict(rtol=1e-5, atol=1e-5)  # float32 rounding over a few hundred steps; any change of
+# physics, emission order or slot assignment moves particles by far more (or changes `slot`)
+
+
+def fixture(name):
+    with np.load(os.path.join(HERE, f"{name}.npz")) as d:
+        return {k: d[k] for k in d.files}
+
+
+def assert_same_particles(got, want):
+    np.testing.assert_array_equal(got["slot"], want["slot"])
+    np.testing.assert_array_equal(got["emitter"], want["emitter"])
+    for key in ("pos", "vel", "age"):
+        np.testing.assert_allclose(got[key], want[key], err_msg=key, **TOL)
+
+
+@pytest.mark.parametrize("name", sorted(FRAME_SHOTS))
+def test_particle_frames_kept(name):
+    want = fixture(f"frames_{name}")
+    assert len(want["slot"]) > 50
+    assert_same_particles(particle_frames(name, FRAME_SHOTS[name]), want)
+
+
+def test_adaptive_particle_step_sizes_kept():
+    want, got = fixture("h_particles"), adaptive_particles()
+    assert want["rejected"] > 0 and want["per_frame"].max() > 4  # a sequence worth pinning
+    np.testing.assert_array_equal(got["per_frame"], want["per_frame"])
+    np.testing.assert_allclose(got["h"], want["h"], rtol=1e-9)
+    assert int(got["rejected"]) == int(want["rejected"])
+    assert_same_particles(got, want)
+
+
+def test_adaptive_cloth_step_sizes_kept():
+    want, got = fixture("h_cloth"), adaptive_cloth()
+    np.testing.assert_array_equal(got["per_frame"], want["per_frame"])
+    np.testing.assert_allclose(got["h"], want["h"], rtol=1e-9)
+    assert int(got["rejected"]) == int(want["rejected"])
+    np.testing.assert_allclose(got["pos"], want["pos"], **TOL)
+
+
+def test_fixed_step_cloths_kept():
+    want, got = fixture("cloth_fixed"), fixed_cloths()
+    assert sorted(got) == sorted(want)
+    for method in want:
+        np.testing.assert_allclose(got[method], want[method], err_msg=method, **TOL)
+
+
+PROBE = """
+import hashlib, sys
+sys.path[:0] = [".", "tests"]  # this checkout, run from its root
+from engine import runtime
+runtime.init("cpu", threads=int(sys.argv[1]))
+from engine.config import load_config
+from engine.scene import Scene
+from engine.particles.emitters import CHUNK_MIN
+from behaviour_scenes import SUB_EMITTERS
+d = dict(SUB_EMITTERS)
+d["emitters"] = [dict(e) for e in d["emitters"]]
+d["emitters"][0].update(rate=3000.0, capacity=4 * CHUNK_MIN)  # a parent ring of 4 slices
+s = Scene(load_config(d), render=False)
+for _ in range(30):
+    s.advance_frame()
+S = s.particles.state
+h = hashlib.sha256()
+for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive", "particle_emitter"):
+    h.update(getattr(S, f).to_numpy().tobytes())
+print(h.hexdigest(), *s.particles.emitters.emitted_counts())
+"""
+
+
+def test_sub_emitters_give_the_same_bytes_with_one_and_two_threads(tmp_path):
+    """Children take slots from a chunked prefix sum over the parents (several slices here):
+    the pool is byte-identical for any thread count."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "probe.py"
+    script.write_text(PROBE)
+    root = os.path.dirname(os.path.dirname(HERE))  # the checkout (HERE is tests/behaviour)
+    runs = [subprocess.run([sys.executable, str(script), str(n)], cwd=root, capture_output=True, text=True)
+            for n in (1, 2)]
+    assert all(r.returncode == 0 for r in runs), [r.stderr[-1500:] for r in runs]
+    out = [r.stdout.split() for r in runs]
+    assert out[0] == out[1], out
+    emitted = [int(v) for v in out[0][1:]]
+    assert emitted[0] > 1000 and emitted[1] > 1000 and emitted[2] > 0, emitted  # parents, children, grandchildren
