@@ -226,13 +226,16 @@ class ParticleScene:
         return Contacts(c.collider[m], c.position[m], c.normal[m], c.speed[m], c.time[m], c.dropped)
 
     def render(self, width: int | None = None, height: int | None = None, camera: Camera | None = None,
-               show_colliders: bool | None = None) -> np.ndarray:
-        """(H, W, 4) uint8 RGBA image (opaque) of the current state, any size, any camera."""
-        rgb = self.scene.render(width, height, camera, show_colliders)
-        out = np.empty(rgb.shape[:2] + (4,), np.uint8)
-        out[..., :3] = rgb
-        out[..., 3] = 255
-        return out
+               show_colliders: bool | None = None, *, out: np.ndarray | None = None,
+               transparent: bool = False, bgra: bool = False) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA image of the current state, any size, any camera (a new size or
+        camera compiles nothing). ``out``: a C-contiguous (H, W, 4) uint8 array to draw into
+        (no allocation per frame). Opaque, unless ``transparent``: premultiplied RGBA with alpha 0
+        where nothing is drawn, to composite over the game's own frame with the blend
+        (ONE, ONE_MINUS_SRC_ALPHA) — additive light carries alpha 0, so it adds. ``bgra``: bytes
+        in B, G, R, A order, as SDL/pygame and X11 surfaces take them."""
+        return self.scene.render(width, height, camera, show_colliders, out=out, transparent=transparent,
+                                 bgra=bgra)
 
     # -- changing what the scene holds (rebuilds between frames) -----------------------------------
     def _data_now(self) -> dict:

@@ -95,6 +95,11 @@ class Colliders:
         v[: self.count] = vel
         self.collider_vel.from_numpy(v)
 
+    def placement(self) -> bytes:
+        """Where the colliders are now, as bytes (normals and radii never change): what a cached
+        background depends on. Read from the host copy, so it costs no kernel launch."""
+        return self._pos[: self.count].tobytes()
+
     def index(self, name: str) -> int:
         for k, s in enumerate(self.specs):
             if s.name == name:

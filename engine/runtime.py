@@ -46,7 +46,7 @@ def _arch_in_use() -> str:
 
 
 def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
-         log_level: str = "warn") -> str:
+         log_level: str = "warn", kernel_profiler: bool = False) -> str:
     """Initialise Taichi once for this process and return the arch really in use ("cpu",
     "cuda", "vulkan", "metal").
 
@@ -58,6 +58,7 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
     warnings (offline-cache lock contention between processes) off its one-line errors with
     "error". The offline cache stays on so a second run of the same scene starts fast; it
     lives where ``PARTICLES_TI_CACHE`` points (a folder) if set, else in Taichi's default place.
+    ``kernel_profiler`` turns on Taichi's per-kernel timer (``particles profile`` uses it).
     """
     if arch not in ARCHES:
         raise ValueError(f"arch: unknown value {arch!r}; allowed: {', '.join(ARCHES)}")
@@ -70,7 +71,7 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
         return "host"
     level = {"warn": ti.WARN, "error": ti.ERROR}[log_level]
     kwargs = dict(default_fp=ti.f32, offline_cache=True, log_level=level, debug=debug,
-                  random_seed=0)
+                  random_seed=0, kernel_profiler=kernel_profiler)
     if os.environ.get("PARTICLES_TI_CACHE"):
         kwargs["offline_cache_file_path"] = os.environ["PARTICLES_TI_CACHE"]
     if threads and arch in ("cpu", "auto"):

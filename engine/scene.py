@@ -87,23 +87,15 @@ class Scene:
                 else:
                     self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
-        self._renderers = {}
-        self.renderer = self.renderer_for(width, height) if render else None
+        self.renderer = None
+        if render:
+            from .render.renderer import Renderer
 
-    def renderer_for(self, width=None, height=None, show_colliders=None):
-        """The renderer for an image size (built, and compiled, once per size)."""
-        from .render.raster import Renderer
-
-        W = int(width or self.cfg.render.width)
-        H = int(height or self.cfg.render.height)
-        show = self.cfg.render.show_colliders if show_colliders is None else bool(show_colliders)
-        key = (W, H, show)
-        if key not in self._renderers:
             p = self.particles
-            rcfg = self.cfg.render.model_copy(update={"show_colliders": show})
-            self._renderers[key] = Renderer(p.state if p else None, self.cfg.emitters, self.colliders,
-                                            rcfg, W, H, bodies=self.bodies)
-        return self._renderers[key]
+            self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
+                                     bodies=self.bodies)
+        self.width = int(width or cfg.render.width)
+        self.height = int(height or cfg.render.height)
 
     # -- stepping -----------------------------------------------------------------------------
     def advance(self, dt: float) -> None:
@@ -127,12 +119,15 @@ class Scene:
         """Live particle slots now (one read-back, cached until the next advance)."""
         return self.particles.count_alive() if self.particles is not None else 0
 
-    def render(self, width=None, height=None, camera=None, show_colliders=None) -> np.ndarray:
-        """(H, W, 3) uint8 sRGB image of the current state."""
-        r = self.renderer if (width is None and height is None and show_colliders is None
-                              and self.renderer is not None) else \
-            self.renderer_for(width, height, show_colliders)
-        return r.render(camera or self.camera)
+    def render(self, width=None, height=None, camera=None, show_colliders=None, *, out=None,
+               transparent=False, bgra=False) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA image of the current state (into ``out`` if given); any size and
+        camera, compiled once (engine.render.renderer)."""
+        if self.renderer is None:
+            raise RuntimeError("render: this scene was built with render=False")
+        return self.renderer.render(camera or self.camera, width or self.width, height or self.height,
+                                    out=out, show_colliders=show_colliders, transparent=transparent,
+                                    bgra=bgra)
 
     # -- read-back ----------------------------------------------------------------------------
     @property

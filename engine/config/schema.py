@@ -352,6 +352,8 @@ class Render(Strict):
     grid: bool = True
     show_colliders: bool = True
     density_shading: Annotated[float, Field(ge=0, le=20)] = 0.6  # thick smoke/dust darkens
+    # large soft sprites drawn into a reduced buffer (Cantlay 2007): "auto", or 1 (off), 0.5, 0.25
+    particle_resolution: Literal["auto", 1, 0.5, 0.25] = "auto"
 
 
 class Scene(Strict):

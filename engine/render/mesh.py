@@ -1,140 +1,240 @@
-"""Soft bodies in the off-screen renderer: shaded triangles (cloth, jelly) and lines (chains,
-hair), z-buffered against the background and occluding the particles drawn after them.
+"""Soft bodies in the renderer: shaded triangles (cloth, jelly) and lines (chains, hair), depth-
+tested against the background and hiding the particles behind them. Parallel and deterministic:
 
-Both loops are serialised: a z-buffer written from several threads races (which triangle wins a
-pixel would depend on timing), and the same config must give the same frame. Triangles are
-smooth-shaded with per-vertex normals (area-weighted, computed in NumPy), lit two-sided by one
-directional light plus ambient, and interpolated perspective-correctly (through 1/z).
+* **Triangles** through a visibility buffer: every triangle, in parallel, rasterises its
+  bounding box and keeps, per pixel, the minimum of the 64-bit key (depth bits << 32 | triangle),
+  an integer ``atomic_min`` — the nearest triangle wins, ties go to the lower index, whatever the
+  thread order (a float z-buffer written from several threads would race). A second pass shades
+  each covered pixel from its winning triangle: smooth normals (area-weighted, gathered per vertex)
+  interpolated perspective-correctly through 1/z, one directional light, two-sided.
+* **Lines** (1 px, bilinear coverage a per sample) add their optical depth −log(1 − a) and their
+  colour weighted by it into fixed-point integers: integer sums are exact in any order, and
+  T = exp(−Σ) is what drawing them one over another gives for lines of one colour.
+
+Only tiles a body touches (this frame or the last) are rewritten: the rest of the frame's
+background and depth stay as the background pass left them.
 """
+# (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
+
 import numpy as np
 import taichi as ti
 
+from .sprites import TILE
+
 vec3 = ti.types.vector(3, ti.f32)
+ND_V4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.f32), ndim=1)  # pixel arrays: flat, y·W + x
+ND_F = ti.types.ndarray(dtype=ti.f32, ndim=1)
+ND_I64 = ti.types.ndarray(dtype=ti.i64, ndim=1)
+ND_I4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.i32), ndim=1)
+ND_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
 NEAR = 0.05
-DEPTH_BIAS = 0.01  # m
+DEPTH_BIAS = 0.01  # m: cloth resting on the ground would z-fight it
+EMPTY = (1 << 63) - 1  # no triangle at this pixel
+FIXED = 65536.0  # fixed-point scale of the line sums
 
 
 class MeshLayer:
-    def __init__(self, bodies, renderer):
+    """Geometry of every drawable body of a scene, concatenated: ``mesh_pos``/``mesh_nrm``/``mesh_col``
+    (V,) vec3 (m, unit, linear RGB), ``tri_idx`` (T,) and ``line_idx`` (L,) vertex indices."""
+
+    def __init__(self, bodies):
         self.bodies = list(bodies)
         nv = [len(b.topology.positions) for b in self.bodies]
-        self.offsets = np.cumsum([0] + nv[:-1]).astype(np.int64)
+        offsets = np.cumsum([0] + nv[:-1]).astype(np.int64)
         self.nv = int(sum(nv))
-        tris = [b.triangles + o for b, o in zip(self.bodies, self.offsets) if len(b.triangles)]
-        lines = [b.lines + o for b, o in zip(self.bodies, self.offsets) if len(b.lines)]
+        tris = [b.triangles + o for b, o in zip(self.bodies, offsets) if len(b.triangles)]
+        lines = [b.lines + o for b, o in zip(self.bodies, offsets) if len(b.lines)]
         self.tris = np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32)
         self.lines = np.concatenate(lines).astype(np.int32) if lines else np.zeros((0, 2), np.int32)
-        self.mesh_pos = ti.Vector.field(3, ti.f32, shape=max(1, self.nv))
-        self.mesh_nrm = ti.Vector.field(3, ti.f32, shape=max(1, self.nv))
-        self.mesh_col = ti.Vector.field(3, ti.f32, shape=max(1, self.nv))
-        cols = np.concatenate([np.tile(np.asarray(b.cfg.color, np.float32), (n, 1))
-                               for b, n in zip(self.bodies, nv)]) if self.nv else np.zeros((1, 3), np.float32)
-        self.mesh_col.from_numpy(np.ascontiguousarray(cols.reshape(-1, 3)[: max(1, self.nv)]))
         self.tri_count, self.line_count = len(self.tris), len(self.lines)
+        n = max(1, self.nv)
+        self.mesh_pos = ti.Vector.field(3, ti.f32, shape=n)
+        self.mesh_nrm = ti.Vector.field(3, ti.f32, shape=n)
+        self.mesh_col = ti.Vector.field(3, ti.f32, shape=n)
+        cols = np.concatenate([np.tile(np.asarray(b.cfg.color, np.float32), (k, 1))
+                               for b, k in zip(self.bodies, nv)]) if self.nv else np.zeros((1, 3), np.float32)
+        self.mesh_col.from_numpy(np.ascontiguousarray(cols[:n], np.float32))
+        self.tri_idx = ti.Vector.field(3, ti.i32, shape=max(1, self.tri_count))
+        self.line_idx = ti.Vector.field(2, ti.i32, shape=max(1, self.line_count))
         if self.tri_count:
-            self.tri_idx = ti.Vector.field(3, ti.i32, shape=self.tri_count)
             self.tri_idx.from_numpy(self.tris)
+            # vertex → triangle adjacency (CSR), for the per-vertex normal gather
+            order = np.argsort(self.tris.ravel(), kind="stable")
+            self.adj_tri = ti.field(ti.i32, shape=len(order))
+            self.adj_tri.from_numpy((order // 3).astype(np.int32))
+            starts = np.searchsorted(self.tris.ravel()[order], np.arange(n + 1)).astype(np.int32)
+            self.adj_start = ti.field(ti.i32, shape=n + 1)
+            self.adj_start.from_numpy(starts)
         if self.line_count:
-            self.line_idx = ti.Vector.field(2, ti.i32, shape=self.line_count)
             self.line_idx.from_numpy(self.lines)
-        self._build(renderer)
+        self._k = _build(self)
 
     def update(self) -> None:
-        """Copy the bodies' node positions in and recompute vertex normals."""
-        if not self.nv:
-            return
-        pos = np.concatenate([b.positions().astype(np.float64) for b in self.bodies])
-        self.mesh_pos.from_numpy(pos.astype(np.float32))
+        """Copy the bodies' node positions in and recompute the vertex normals."""
+        if self.nv:
+            pos = np.concatenate([b.positions() for b in self.bodies]).astype(np.float32)
+            self.mesh_pos.from_numpy(pos)
+            if self.tri_count:
+                self._k["normals"]()
+
+    def draw(self, t, cam) -> None:
+        """Rasterise into the frame targets ``t`` (engine.render.targets.FrameTargets): the
+        visibility buffer and line sums, then shade the touched tiles into ``t.fbg``/``t.fdep``."""
+        k = self._k
+        W, H, TX = t.W, t.H, t.TX
+        k["clear"](t.vis, t.lines, t.dirty, t.dirty_prev, H, W, t.TX * t.TY)
         if self.tri_count:
-            t = self.tris
-            fn = np.cross(pos[t[:, 1]] - pos[t[:, 0]], pos[t[:, 2]] - pos[t[:, 0]])  # area-weighted
-            n = np.zeros_like(pos)
-            for k in range(3):
-                np.add.at(n, t[:, k], fn)
-            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-            self.mesh_nrm.from_numpy(n.astype(np.float32))
-
-    def _build(self, R):
-        W, H = R.W, R.H
-        bg, depth = R.bg, R.depth
-        P, N, C = self.mesh_pos, self.mesh_nrm, self.mesh_col
-        tri_count, line_count = self.tri_count, self.line_count
-        tri_idx = self.tri_idx if tri_count else None
-        line_idx = self.line_idx if line_count else None
-
-        @ti.func
-        def project(p, o, f, r, u, th):
-            d = p - o
-            z = d.dot(f)
-            s = 0.5 * H / (ti.max(z, NEAR) * th)
-            return ti.Vector([d.dot(r) * s + 0.5 * W, 0.5 * H - d.dot(u) * s, z])
-
-        @ti.kernel
-        def draw_triangles(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
-            ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
-            ti.loop_config(serialize=True)
-            for t in range(tri_count):
-                ia, ib, ic = tri_idx[t][0], tri_idx[t][1], tri_idx[t][2]
-                a = project(P[ia], o, f, r, u, th)
-                b = project(P[ib], o, f, r, u, th)
-                c = project(P[ic], o, f, r, u, th)
-                area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-                if a[2] > NEAR and b[2] > NEAR and c[2] > NEAR and ti.abs(area) > 1e-9:
-                    x0 = ti.max(0, ti.cast(ti.floor(ti.min(a[0], b[0], c[0])), ti.i32))
-                    x1 = ti.min(W - 1, ti.cast(ti.floor(ti.max(a[0], b[0], c[0])), ti.i32))
-                    y0 = ti.max(0, ti.cast(ti.floor(ti.min(a[1], b[1], c[1])), ti.i32))
-                    y1 = ti.min(H - 1, ti.cast(ti.floor(ti.max(a[1], b[1], c[1])), ti.i32))
-                    for py in range(y0, y1 + 1):
-                        for px in range(x0, x1 + 1):
-                            sx, sy = px + 0.5, py + 0.5
-                            w0 = ((c[0] - b[0]) * (sy - b[1]) - (c[1] - b[1]) * (sx - b[0])) / area
-                            w1 = ((a[0] - c[0]) * (sy - c[1]) - (a[1] - c[1]) * (sx - c[0])) / area
-                            w2 = 1.0 - w0 - w1
-                            if w0 >= 0 and w1 >= 0 and w2 >= 0:
-                                iz = w0 / a[2] + w1 / b[2] + w2 / c[2]  # 1/z is linear on screen
-                                z = 1.0 / iz
-                                # 1 cm of depth bias: cloth resting on the ground would z-fight it
-                                if z - DEPTH_BIAS < depth[py, px]:
-                                    depth[py, px] = z - DEPTH_BIAS
-                                    n = ((w0 / a[2]) * N[ia] + (w1 / b[2]) * N[ib] + (w2 / c[2]) * N[ic]) * z
-                                    col = ((w0 / a[2]) * C[ia] + (w1 / b[2]) * C[ib] + (w2 / c[2]) * C[ic]) * z
-                                    n = n.normalized()
-                                    view = (o - (P[ia] * w0 + P[ib] * w1 + P[ic] * w2)).normalized()
-                                    if n.dot(view) < 0:  # two-sided: shade the side we see
-                                        n = -n
-                                    diff = ti.max(0.0, n.dot(ldir))
-                                    hv = (ldir + view).normalized()
-                                    spec = ti.pow(ti.max(0.0, n.dot(hv)), 24.0)
-                                    bg[py, px] = col * (0.18 + 0.7 * diff) * 0.35 + 0.04 * spec
-
-        @ti.kernel
-        def draw_lines(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32):
-            ti.loop_config(serialize=True)
-            for k in range(line_count):
-                ia, ib = line_idx[k][0], line_idx[k][1]
-                a = project(P[ia], o, f, r, u, th)
-                b = project(P[ib], o, f, r, u, th)
-                if a[2] > NEAR and b[2] > NEAR:
-                    length = ti.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2)
-                    n = ti.min(4096, ti.cast(length * 2.0, ti.i32) + 1)
-                    col = 0.5 * (C[ia] + C[ib]) * 0.35
-                    for s in range(n + 1):
-                        q = a + (b - a) * (s / n)
-                        fx, fy = q[0] - 0.5, q[1] - 0.5  # bilinear coverage of a 1-px line
-                        ix, iy = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
-                        tx, ty = fx - ix, fy - iy
-                        for dy in ti.static(range(2)):
-                            for dx in ti.static(range(2)):
-                                X, Y = ix + dx, iy + dy
-                                if 0 <= X < W and 0 <= Y < H and q[2] < depth[Y, X] + 0.02:
-                                    w = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
-                                    a_ = ti.min(1.0, 1.6 * w)
-                                    bg[Y, X] = bg[Y, X] * (1.0 - a_) + col * a_
-
-        self._tris, self._lines = draw_triangles, draw_lines
-
-    def draw(self, args) -> None:
-        if self.tri_count:
-            self._tris(*args)
+            k["tris"](t.vis, t.dirty, *cam, W, H, TX)
         if self.line_count:
-            self._lines(*args)
+            k["lines"](t.lines, t.vis, t.depth, t.dirty, *cam, W, H, TX)
+        k["shade"](t.fbg, t.fdep, t.bgc, t.depth, t.vis, t.lines, t.dirty, t.dirty_prev, *cam,
+                   W, H, TX, t.TY)
+
+
+def _build(m: MeshLayer):
+    P, N, C = m.mesh_pos, m.mesh_nrm, m.mesh_col
+    tri_idx, line_idx = m.tri_idx, m.line_idx
+    tri_count, line_count, nv = m.tri_count, m.line_count, max(1, m.nv)
+    adj_tri = getattr(m, "adj_tri", None)
+    adj_start = getattr(m, "adj_start", None)
+
+    @ti.func
+    def project(p, o, f, r, u, th, W, H):
+        d = p - o
+        z = d.dot(f)
+        s = 0.5 * H / (ti.max(z, NEAR) * th)
+        return ti.Vector([d.dot(r) * s + 0.5 * W, 0.5 * H - d.dot(u) * s, z])
+
+    @ti.func
+    def bary(a, b, c, sx, sy):
+        area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        w0 = ((c[0] - b[0]) * (sy - b[1]) - (c[1] - b[1]) * (sx - b[0])) / area
+        w1 = ((a[0] - c[0]) * (sy - c[1]) - (a[1] - c[1]) * (sx - c[0])) / area
+        return w0, w1, 1.0 - w0 - w1
+
+    @ti.kernel
+    def normals():
+        for v in range(nv):
+            n = ti.Vector([0.0, 0.0, 0.0])
+            for j in range(adj_start[v], adj_start[v + 1]):
+                t = tri_idx[adj_tri[j]]
+                n += (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]])  # area-weighted
+            N[v] = n / ti.max(n.norm(), 1e-12)
+
+    @ti.kernel
+    def clear(vis: ND_I64, lines: ND_I4, dirty: ND_I1, dirty_prev: ND_I1, H: ti.i32, W: ti.i32,
+              T: ti.i32):
+        for t in range(T):  # tiles touched last frame are rewritten (restored) this frame too
+            dirty_prev[t] = dirty[t]
+            dirty[t] = 0
+        for y in range(H):
+            for k in range(y * W, y * W + W):
+                vis[k] = ti.i64(EMPTY)
+                lines[k] = ti.Vector([0, 0, 0, 0])
+
+    @ti.kernel
+    def tris(vis: ND_I64, dirty: ND_I1, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32,
+             H: ti.i32, TX: ti.i32):
+        for t in range(tri_count):
+            i = tri_idx[t]
+            a = project(P[i[0]], o, f, r, u, th, W, H)
+            b = project(P[i[1]], o, f, r, u, th, W, H)
+            c = project(P[i[2]], o, f, r, u, th, W, H)
+            area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+            if a[2] > NEAR and b[2] > NEAR and c[2] > NEAR and ti.abs(area) > 1e-9:
+                x0 = ti.max(0, ti.cast(ti.floor(ti.min(a[0], b[0], c[0])), ti.i32))
+                x1 = ti.min(W - 1, ti.cast(ti.floor(ti.max(a[0], b[0], c[0])), ti.i32))
+                y0 = ti.max(0, ti.cast(ti.floor(ti.min(a[1], b[1], c[1])), ti.i32))
+                y1 = ti.min(H - 1, ti.cast(ti.floor(ti.max(a[1], b[1], c[1])), ti.i32))
+                for py in range(y0, y1 + 1):
+                    for px in range(x0, x1 + 1):
+                        w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
+                        if w0 >= 0 and w1 >= 0 and w2 >= 0:
+                            z = 1.0 / (w0 / a[2] + w1 / b[2] + w2 / c[2])  # 1/z is linear on screen
+                            key = (ti.cast(ti.bit_cast(z - DEPTH_BIAS, ti.i32), ti.i64) << 32) | ti.cast(t, ti.i64)
+                            ti.atomic_min(vis[py * W + px], key)
+                            dirty[(py // TILE) * TX + px // TILE] = 1  # same value from any thread
+        # (positive floats order like their bit patterns, so the integer minimum is the nearest)
+
+    @ti.func
+    def tri_depth(vis: ti.template(), i):
+        k = vis[i]
+        z = 1e30
+        if k != ti.i64(EMPTY):
+            z = ti.bit_cast(ti.cast(k >> 32, ti.i32), ti.f32)
+        return z
+
+    @ti.kernel
+    def lines_k(acc: ND_I4, vis: ND_I64, depth: ND_F, dirty: ND_I1, o: vec3, f: vec3, r: vec3,
+                u: vec3, th: ti.f32, W: ti.i32, H: ti.i32, TX: ti.i32):
+        for k in range(line_count):
+            ia, ib = line_idx[k][0], line_idx[k][1]
+            a = project(P[ia], o, f, r, u, th, W, H)
+            b = project(P[ib], o, f, r, u, th, W, H)
+            if a[2] > NEAR and b[2] > NEAR:
+                length = ti.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2)
+                n = ti.min(4096, ti.cast(length * 2.0, ti.i32) + 1)
+                col = 0.5 * (C[ia] + C[ib]) * 0.35
+                for s in range(n + 1):
+                    q = a + (b - a) * (s / n)
+                    fx, fy = q[0] - 0.5, q[1] - 0.5  # bilinear coverage of a 1-px line
+                    ix, iy = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
+                    tx, ty = fx - ix, fy - iy
+                    for dy in ti.static(range(2)):
+                        for dx in ti.static(range(2)):
+                            X, Y = ix + dx, iy + dy
+                            if 0 <= X < W and 0 <= Y < H:
+                                if q[2] < ti.min(depth[Y * W + X], tri_depth(vis, Y * W + X)) + 0.02:
+                                    w = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
+                                    tau = -ti.log(1.0 - ti.min(0.999, 1.6 * w))
+                                    v = ti.cast(ti.Vector([tau, tau * col[0], tau * col[1],
+                                                           tau * col[2]]) * FIXED, ti.i32)
+                                    ti.atomic_add(acc[Y * W + X], v)  # integers: exact in any order
+                                    dirty[(Y // TILE) * TX + X // TILE] = 1
+
+    @ti.kernel
+    def shade(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, vis: ND_I64, acc: ND_I4,
+              dirty: ND_I1, dirty_prev: ND_I1, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32,
+              W: ti.i32, H: ti.i32, TX: ti.i32, TY: ti.i32):
+        ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
+        for t in range(TX * TY):
+            if dirty[t] != 0 or dirty_prev[t] != 0:
+                px0, py0 = (t % TX) * TILE, (t // TX) * TILE
+                for py in range(py0, ti.min(H, py0 + TILE)):
+                    for px in range(px0, ti.min(W, px0 + TILE)):
+                        k = py * W + px
+                        c4 = bgc[k]
+                        z = depth[k]
+                        zt = tri_depth(vis, k)
+                        if ti.static(tri_count > 0):
+                            if zt < z:
+                                key = vis[k]
+                                i = tri_idx[ti.cast(key - ((key >> 32) << 32), ti.i32)]
+                                a = project(P[i[0]], o, f, r, u, th, W, H)
+                                b = project(P[i[1]], o, f, r, u, th, W, H)
+                                c = project(P[i[2]], o, f, r, u, th, W, H)
+                                w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
+                                w0, w1, w2 = w0 / a[2], w1 / b[2], w2 / c[2]
+                                iz = 1.0 / (w0 + w1 + w2)
+                                n = ((w0 * N[i[0]] + w1 * N[i[1]] + w2 * N[i[2]]) * iz).normalized()
+                                col = (w0 * C[i[0]] + w1 * C[i[1]] + w2 * C[i[2]]) * iz
+                                view = (o - (P[i[0]] * w0 + P[i[1]] * w1 + P[i[2]] * w2) * iz).normalized()
+                                if n.dot(view) < 0:  # two-sided: shade the side we see
+                                    n = -n
+                                diff = ti.max(0.0, n.dot(ldir))
+                                hv = (ldir + view).normalized()
+                                spec = ti.pow(ti.max(0.0, n.dot(hv)), 24.0)
+                                sc = col * (0.18 + 0.7 * diff) * 0.35 + 0.04 * spec
+                                c4 = ti.Vector([sc[0], sc[1], sc[2], 1.0])
+                                z = zt
+                        if ti.static(line_count > 0):
+                            s = acc[k]
+                            if s[0] > 0:
+                                T = ti.exp(-s[0] / FIXED)
+                                lc = ti.Vector([s[1], s[2], s[3]]) / ti.cast(s[0], ti.f32)
+                                c3 = ti.Vector([c4[0], c4[1], c4[2]]) * T + lc * (1.0 - T)
+                                c4 = ti.Vector([c3[0], c3[1], c3[2], c4[3] * T + (1.0 - T)])
+                        fbg[k] = c4
+                        fdep[k] = z
+
+    return dict(normals=normals, clear=clear, tris=tris, lines=lines_k, shade=shade)

@@ -127,7 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
     b.add_argument("--quick", action="store_true", help="small sizes (CI: well under a minute)")
     b.add_argument("--only", default=None,
-                   help="comma-separated sections: step, frame, ode, startup, features, cloth, output")
+                   help="comma-separated sections: step, frame, effects, ode, startup, features, cloth, output")
     b.add_argument("--quiet", action="store_true", help="no progress display")
     b.set_defaults(func=_cmd_bench)
 
@@ -146,6 +146,13 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--screenshot", default=None, type=T(flags.path),
                    help="save the last frame shown to this PNG")
     w.set_defaults(func=lambda a: __import__("engine.tools.viewer", fromlist=["x"]).cmd_view(a))
+
+    pr = sub.add_parser("profile", help="per-kernel milliseconds of a config's frames (game-style)")
+    pr.add_argument("config")
+    pr.add_argument("--size", default=(1280, 720), type=T(flags.size),
+                    help="image size WxH (default 1280x720)")
+    pr.add_argument("--frames", type=T(flags.integer(1, 10_000)), default=20)
+    pr.set_defaults(func=_cmd_profile, kernel_profiler=True)
 
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
     g.add_argument("--out", default=os.path.join("renders", "gallery"), type=T(flags.path))
@@ -168,6 +175,17 @@ def _cmd_chart(args) -> int:
         raise UserError(str(e)) from None
     for p in paths:
         print(p)
+    return EXIT_OK
+
+
+def _cmd_profile(args) -> int:
+    from ..config import ConfigError
+    from .profile import profile
+
+    try:
+        print(profile(args.config, *args.size, args.frames))
+    except ConfigError as e:
+        raise UserError("\n".join(f"{args.config}: {p}" for p in e.problems)) from None
     return EXIT_OK
 
 
@@ -225,7 +243,8 @@ def _init_taichi(args) -> None:
     from .. import runtime
 
     try:  # "error": Taichi's warnings (offline-cache lock contention) stay off our stderr
-        runtime.init(args.arch, threads=args.threads, log_level="error")
+        runtime.init(args.arch, threads=args.threads, log_level="error",
+                     kernel_profiler=getattr(args, "kernel_profiler", False))
     except runtime.ArchUnavailable as e:
         raise UserError(f"--arch: {e}; use --arch cpu, or --arch auto to take a GPU where one "
                         f"starts and the CPU otherwise") from None

@@ -1,7 +1,8 @@
 """``particles bench``: the engine's costs measured side by side in one process run.
 
 Sections (``--only`` takes their names): ``step`` (the particle step against NumPy and the
-bandwidth limit), ``frame`` (a full 1M-particle frame), ``ode`` (adaptive RK4 against scipy's
+bandwidth limit), ``frame`` (a full 1M-particle frame), ``effects`` (every shipped config as a game
+runs it, and an empty scene's fixed frame cost), ``ode`` (adaptive RK4 against scipy's
 RK45 at equal error), ``startup`` (cold and warm ``particles run``), ``features`` (the cost of each
 optional feature and proof that an unused one compiles nothing), ``cloth`` (when
 ``engine.springs`` exists), ``output`` (``particles run``'s frame rate against sim + render). ``quick`` uses small sizes so CI can run it in seconds.
@@ -14,9 +15,9 @@ import time
 
 from .common import Row, format_table
 
-SECTIONS = ("step", "frame", "ode", "startup", "features", "cloth", "output")
-_MODULES = {"step": "step", "frame": "frame", "ode": "ode_vs_scipy", "startup": "startup",
-            "features": "features", "cloth": "cloth", "output": "output"}
+SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output")
+_MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy",
+            "startup": "startup", "features": "features", "cloth": "cloth", "output": "output"}
 
 
 def run(quick: bool = False, only=None, echo=None, quiet: bool = True):

@@ -1,0 +1,128 @@
+"""The opaque background a frame is composited over: a sky gradient, faint 1 m grids on plane
+colliders (or on the ground when there are none) and faintly lit collider spheres, with the depth
+particles are tested against (a particle behind a sphere is hidden; near a surface it fades).
+
+Drawn only when the camera, the colliders or the image size change; between such frames the
+renderer keeps it, its reduced-resolution depth and its tone-mapped packed copy.
+"""
+# (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
+
+import taichi as ti
+
+from ..colliders import PLANE
+
+vec3 = ti.types.vector(3, ti.f32)
+ND_V4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.f32), ndim=1)  # pixel arrays: flat, y·W + x
+ND_F = ti.types.ndarray(dtype=ti.f32, ndim=1)
+SKY_DEPTH = 1e30
+
+
+@ti.func
+def ray_dir(px, py, f, r, u, th, W, H):
+    """Unit view ray through the centre of pixel (px, py) of a W×H image."""
+    x = (2.0 * (px + 0.5) / W - 1.0) * th * (W / H)
+    y = (1.0 - 2.0 * (py + 0.5) / H) * th
+    return (f + x * r + y * u).normalized()
+
+
+@ti.func
+def grid_shade(o, d, p0, n, th, f, col, zbest, H):
+    """A faint 1 m grid on the plane (p0, n) seen along the ray o + s·d; returns (colour, depth)."""
+    dn = d.dot(n)
+    z = zbest
+    if dn < -1e-6:
+        s = (p0 - o).dot(n) / dn
+        zz = s * d.dot(f)
+        if s > 0 and zz < zbest:
+            q = o + s * d
+            a = ti.Vector([1.0, 0.0, 0.0]) if ti.abs(n[0]) < 0.9 else ti.Vector([0.0, 0.0, 1.0])
+            e1 = n.cross(a).normalized()
+            e2 = n.cross(e1)
+            uu, vv = (q - p0).dot(e1), (q - p0).dot(e2)
+            foot = s * 2.0 * th / H / ti.max(ti.abs(dn), 0.05)  # metres per pixel
+            du = ti.abs(uu - ti.round(uu))
+            dv = ti.abs(vv - ti.round(vv))
+            line = ti.max(ti.max(0.0, 1.0 - du / (1.2 * foot)), ti.max(0.0, 1.0 - dv / (1.2 * foot)))
+            line *= ti.min(1.0, 0.25 / foot)  # fade lines that become finer than a pixel
+            fade = ti.exp(-s / 40.0)
+            col = (ti.Vector([0.018, 0.019, 0.022]) + line * ti.Vector([0.030, 0.032, 0.036])) * fade \
+                + col * (1.0 - fade)
+            z = zz
+    return col, z
+
+
+def build_background_kernel(render_cfg, colliders):
+    """``background(bgc, depth, o, f, r, u, th, W, H, show)``: bgc (H·W,) vec4 = (RGB, 0), depth
+    (H·W,) f32 metres along the view axis (SKY_DEPTH where nothing is hit). ``show`` 0 hides the
+    colliders (they are compiled in; the flag is a runtime switch, not a second kernel)."""
+    bgc = tuple(float(c) for c in render_cfg.background)
+    specs = colliders.specs if colliders is not None else []
+    vis = [k for k, s in enumerate(specs) if s.visible]
+    planes = tuple(k for k in vis if colliders.kinds[k] == PLANE)
+    spheres = tuple(k for k in vis if colliders.kinds[k] != PLANE)
+    grid = bool(render_cfg.grid)
+    if colliders is not None:
+        cpt, cnr, crad = colliders.collider_point, colliders.collider_normal, colliders.collider_radius
+    else:
+        cpt = cnr = crad = None
+
+    @ti.kernel
+    def background(out: ND_V4, depth: ND_F, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32,
+                   W: ti.i32, H: ti.i32, show: ti.i32):
+        for py in range(H):
+            for px in range(W):
+                d = ray_dir(px, py, f, r, u, th, W, H)
+                col = ti.Vector([bgc[0], bgc[1], bgc[2]]) * (0.6 + 0.8 * (0.5 + 0.5 * d[1]))
+                z = SKY_DEPTH
+                if ti.static(grid):  # the ground grid, unless a plane collider is shown
+                    ground = 1
+                    if ti.static(len(planes) > 0):
+                        ground = ti.select(show == 0, 1, 0)
+                    if ground != 0:
+                        col, z = grid_shade(o, d, ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 1.0, 0.0]),
+                                            th, f, col, z, H)
+                if show != 0:
+                    for k in ti.static(planes):
+                        col, z = grid_shade(o, d, cpt[k], cnr[k], th, f, col, z, H)
+                    for k in ti.static(spheres):
+                        oc = o - cpt[k]
+                        b = oc.dot(d)
+                        c = oc.dot(oc) - crad[k] * crad[k]
+                        disc = b * b - c
+                        if disc > 0:
+                            s = -b - ti.sqrt(disc)
+                            zz = s * d.dot(f)
+                            if s > 0 and zz < z:
+                                n = (o + s * d - cpt[k]).normalized()
+                                ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
+                                lam = ti.max(0.0, n.dot(ldir))
+                                rim = 1.0 - ti.abs(n.dot(d))
+                                col = ti.Vector([0.02, 0.021, 0.025]) \
+                                    + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) + 0.03 * rim * rim * rim
+                                z = zz
+                out[py * W + px] = ti.Vector([col[0], col[1], col[2], 0.0])
+                depth[py * W + px] = z
+
+    return background
+
+
+@ti.kernel
+def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, k: ti.i32):
+    """The reduced level's depth, stored after the full-resolution one (depth[W·H + y·Wl + x]):
+    the farthest depth under each k×k block (Cantlay 2007: with the maximum, a reduced-resolution
+    particle is not hidden by a thin nearer edge inside its texel)."""
+    for y in range(Hl):
+        for x in range(Wl):
+            z = 0.0
+            for dy in range(k):
+                for dx in range(k):
+                    z = ti.max(z, depth[ti.min(y * k + dy, H - 1) * W + ti.min(x * k + dx, W - 1)])
+            depth[W * H + y * Wl + x] = z
+
+
+@ti.kernel
+def copy_background(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, n: ti.i32):
+    """The frame's own background and depth (soft bodies draw into them) from the kept ones."""
+    for k in range(n):
+        fbg[k] = bgc[k]
+        fdep[k] = depth[k]

@@ -1,0 +1,425 @@
+"""Splat, composite and tone map in one pass per tile (or per pixel): the frame's only full pass.
+
+Two schedules give the same image (each pixel takes its tile's sprites in slot order; see
+``splat.py`` for what a sprite adds):
+
+* **per tile** (the CPU's): one thread per 16×16 tile walks the tile's sprite list once and adds
+  each disc to the few pixels it covers (small discs as unrolled 2×2 / 4×4 blocks), into the tile's
+  slice of the accumulator arrays — hot in cache, written by that thread only, no atomics — then
+  composites and tone-maps the tile's pixels straight into the packed RGBA output. A tile that no
+  sprite, reduced-buffer sprite or soft body touches copies the cached, already tone-mapped
+  background: a still frame costs a copy, not a shading pass (no clears, no `exp`, no `pow`).
+* **per pixel** (for GPUs, after 3D Gaussian Splatting's rasterizer, Kerbl et al. 2023): one thread
+  per pixel walks its tile's list, accumulating in registers; no accumulator arrays at all.
+
+The reduced buffer (level 1, Cantlay 2007) is splatted first by the same schedules into its own
+accumulators; the full-resolution pass samples it with a bilateral (depth-aware) bilinear upsample:
+each of the four nearest texels weighs bilinear × 1 / (10⁻³ + |z_texel − z| / z), so smoke does not
+bleed across the edge of a nearer surface.
+
+Tone map: exposure, the ACES filmic fit (Narkowicz 2015), sRGB by a 16,384-entry table of 8-bit
+values (``pow`` once per entry at build, not three times per pixel), packed as one u32 RGBA per
+pixel (bytes R, G, B, A in memory).
+"""
+# (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
+
+import numpy as np
+import taichi as ti
+
+from .sprites import TILE
+from .splat import add_sprite, capsule_point, disc_weight, record_box
+
+LUT_SIZE = 16384
+LUT_MAX = 8.0
+EMPTY_LAYER = ti.Vector([0.0, 0.0, 0.0, 1.0])  # a layer that draws nothing: RGB 0, T 1
+vec4 = ti.types.vector(4, ti.f32)
+vec16 = ti.types.vector(16, ti.f32)
+# pixel arrays are flat, (H·W,) in row-major order, indexed y·W + x: a 2-D ndarray recomputes
+# its strides at every access (measured 1.2–1.7× slower in these loops than a flat index)
+ND_V4 = ti.types.ndarray(dtype=vec4, ndim=1)
+ND_F = ti.types.ndarray(dtype=ti.f32, ndim=1)
+ND_U32 = ti.types.ndarray(dtype=ti.u32, ndim=1)
+ND_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+ND_PAIRS = ti.types.ndarray(dtype=vec16, ndim=1)
+
+
+def tonemap_table(n: int = LUT_SIZE, x_max: float = LUT_MAX) -> np.ndarray:
+    """8-bit sRGB (IEC 61966-2-1) of the ACES filmic fit (Narkowicz 2015) of n linear values,
+    spaced evenly in sqrt(x / x_max) (fine steps near black, where sRGB is steep). ACES reaches 1
+    at x ≈ 7.24, so x_max = 8 loses nothing."""
+    x = x_max * np.linspace(0.0, 1.0, n) ** 2
+    a = np.clip((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
+    s = np.where(a <= 0.0031308, 12.92 * a, 1.055 * np.power(a, 1.0 / 2.4) - 0.055)
+    return np.minimum(255, np.floor(s * 255.0 + 0.5)).astype(np.int32)
+
+
+def build_composite_kernels(uses_add: bool, uses_alpha: bool):
+    lut = ti.field(ti.i32, shape=LUT_SIZE)
+    lut.from_numpy(tonemap_table())
+
+    @ti.func
+    def pack(c, alpha, bgra):
+        """Linear RGB (exposure applied) → ACES → sRGB 8 bits by table, with alpha, as one u32:
+        bytes R, G, B, A in memory (``bgra`` 0) or B, G, R, A (windowing systems' order)."""
+        v = ti.sqrt(ti.math.clamp(c, 0.0, LUT_MAX) * (1.0 / LUT_MAX)) * (LUT_SIZE - 1) + 0.5
+        r = ti.cast(lut[ti.cast(v[0], ti.i32)], ti.u32)
+        g = ti.cast(lut[ti.cast(v[1], ti.i32)], ti.u32)
+        b = ti.cast(lut[ti.cast(v[2], ti.i32)], ti.u32)
+        a = ti.cast(ti.min(255.0, alpha * 255.0 + 0.5), ti.u32)
+        if bgra != 0:
+            r, b = b, r
+        return r | (g << 8) | (b << 16) | (a << 24)
+
+    @ti.func
+    def layer(A, B, shading):
+        """A pixel's splat accumulators → a premultiplied layer (RGB, T): additive light plus the
+        OIT colour (McGuire & Bavoil 2013, eq. 6) times (1 − T); thick smoke is darker inside
+        (light reaching the core is attenuated: shade = 0.25 + 0.75·T^k, a one-parameter,
+        order-independent stand-in for self-shadowing)."""
+        T = A[3]
+        c = ti.Vector([A[0], A[1], A[2]])
+        if ti.static(uses_alpha):
+            if B[3] > 1e-8:
+                shade = 0.25 + 0.75 * ti.pow(ti.max(T, 1e-30), shading)
+                c += ti.Vector([B[0], B[1], B[2]]) * (shade * (1.0 - T) / B[3])
+        return ti.Vector([c[0], c[1], c[2], T])
+
+    @ti.func
+    def finish(bg, lo, full, exposure, mode):
+        """bg (RGB, coverage), then the reduced layer over it, then the full-resolution layer:
+        c = (bg·T_lo + rgb_lo)·T + rgb. Coverage is 1 for soft bodies; the background itself has 0
+        and is left out of a transparent render (``mode`` bit 0; premultiplied, alpha =
+        1 − (1 − cover)·T_lo·T). ``mode`` bit 1: BGRA byte order."""
+        c = ti.Vector([bg[0], bg[1], bg[2]])
+        cover = 1.0
+        if mode & 1:
+            c = c * bg[3]
+            cover = bg[3]
+        c = c * lo[3] + ti.Vector([lo[0], lo[1], lo[2]])
+        c = c * full[3] + ti.Vector([full[0], full[1], full[2]])
+        return pack(c * exposure, 1.0 - (1.0 - cover) * lo[3] * full[3], mode & 2)
+
+    @ti.func
+    def lo_sample(px, py, z, lo: ti.template(), rows: ti.template(), depth_lo: ti.template(), LO, W,
+                  Wl, Hl, s, edge):
+        """The reduced layer at full-resolution pixel (px, py) of depth z, bilinear: a vertical
+        lerp between two rows already interpolated along x (``lo_rows``). In a tile where the
+        reduced depths differ by more than 10 % (``edge``: a silhouette, not a receding floor) and
+        at this pixel too, bilateral instead: each of the four texels weighs bilinear ×
+        1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface."""
+        v = (py + 0.5) * s - 0.5
+        j0 = ti.cast(ti.floor(v), ti.i32)
+        fy = v - j0
+        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+        out = (1.0 - fy) * rows[ja * W + px] + fy * rows[jb * W + px]
+        if edge != 0:
+            u = (px + 0.5) * s - 0.5
+            i0 = ti.cast(ti.floor(u), ti.i32)
+            fx = u - i0
+            xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+            ra, rb = LO + ja * Wl, LO + jb * Wl
+            z00, z10 = depth_lo[ra + xa], depth_lo[ra + xb]
+            z01, z11 = depth_lo[rb + xa], depth_lo[rb + xb]
+            if ti.max(z00, z10, z01, z11) - ti.min(z00, z10, z01, z11) > 0.1 * z:
+                iz = 1.0 / z
+                w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(z00 - z) * iz)
+                w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(z10 - z) * iz)
+                w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(z01 - z) * iz)
+                w11 = fx * fy / (1e-3 + ti.abs(z11 - z) * iz)
+                out = (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa]
+                       + w11 * lo[rb + xb]) / (w00 + w10 + w01 + w11)
+        return out
+
+    @ti.func
+    def lo_edge(px0, py0, px1, py1, depth_lo: ti.template(), LO, Wl, Hl, s):
+        """Whether the reduced depths a tile's upsample reads differ by more than 10 % (then the
+        bilateral weights are needed; elsewhere bilinear is the same and cheaper)."""
+        lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * s - 0.5), ti.i32))
+        lx1 = ti.min(Wl - 1, ti.cast(ti.floor((px1 + 0.5) * s - 0.5), ti.i32) + 1)
+        ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * s - 0.5), ti.i32))
+        ly1 = ti.min(Hl - 1, ti.cast(ti.floor((py1 + 0.5) * s - 0.5), ti.i32) + 1)
+        lo_z, hi_z = 1e30, 0.0
+        for ly in range(ly0, ly1 + 1):
+            for k in range(LO + ly * Wl + lx0, LO + ly * Wl + lx1 + 1):
+                lo_z = ti.min(lo_z, depth_lo[k])
+                hi_z = ti.max(hi_z, depth_lo[k])
+        return ti.select(hi_z - lo_z > 0.1 * lo_z, 1, 0)
+
+    @ti.func
+    def deposit(px0, py0, px1, py1, rec, accA: ti.template(), accB: ti.template(),
+                dep: ti.template(), base, W):
+        """A record onto the pixels of [px0, px1] × [py0, py1] it covers."""
+        cx, cy, rad = rec[0], rec[1], rec[2]
+        inv_r2 = 1.0 / (rad * rad)
+        col = ti.Vector([rec[4], rec[5], rec[6]])
+        is_add = rec[13] != 0.0
+        if rec[12] < 0:  # a streak: each row's span of the capsule, one weight per pixel
+            tx, ty = rec[9], rec[10]
+            y0 = ti.max(py0, ti.cast(ti.floor(ti.min(cy, ty) - rad), ti.i32))
+            y1 = ti.min(py1, ti.cast(ti.floor(ti.max(cy, ty) + rad), ti.i32))
+            for yy in range(y0, y1 + 1):
+                # the part of the segment within rad of this row, widened by rad
+                lo_t, hi_t = 0.0, 1.0
+                if ti.abs(ty - cy) > 1e-6:
+                    ta = (yy + 0.5 - rad - cy) / (ty - cy)
+                    tb = (yy + 0.5 + rad - cy) / (ty - cy)
+                    lo_t = ti.max(0.0, ti.min(ta, tb))
+                    hi_t = ti.min(1.0, ti.max(ta, tb))
+                xa, xb = cx + lo_t * (tx - cx), cx + hi_t * (tx - cx)
+                x0 = ti.max(px0, ti.cast(ti.floor(ti.min(xa, xb) - rad), ti.i32))
+                x1 = ti.min(px1, ti.cast(ti.floor(ti.max(xa, xb) + rad), ti.i32))
+                for xx in range(x0, x1 + 1):
+                    qx, qy, fade = capsule_point(xx, yy, rec)
+                    pixel(xx, yy, True, qx, qy, inv_r2, rec, col, rec[7] * fade, is_add, rec[8],
+                          accA, accB, dep, base, W)
+        else:
+            x0 = ti.max(px0, ti.cast(ti.floor(cx - rad), ti.i32))
+            x1 = ti.min(px1, ti.cast(ti.floor(cx + rad), ti.i32))
+            y0 = ti.max(py0, ti.cast(ti.floor(cy - rad), ti.i32))
+            y1 = ti.min(py1, ti.cast(ti.floor(cy + rad), ti.i32))
+            if x0 <= x1 and y0 <= y1:
+                a, energy = rec[7], rec[8]
+                span = ti.max(x1 - x0, y1 - y0)
+                if span < 2:
+                    block(2, x0, y0, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB,
+                          dep, base, W)
+                elif span < 4:
+                    block(4, x0, y0, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB,
+                          dep, base, W)
+                else:  # large discs are few: one inlined pixel keeps the kernel (and its build) small
+                    for yy in range(y0, y1 + 1):
+                        # only the row's span inside the circle (a box wastes 1 − π/4 of its pixels)
+                        dy = yy + 0.5 - cy
+                        half = ti.sqrt(ti.max(0.0, rad * rad - dy * dy))
+                        for xx in range(ti.max(x0, ti.cast(ti.floor(cx - half), ti.i32)),
+                                        ti.min(x1, ti.cast(ti.floor(cx + half), ti.i32)) + 1):
+                            pixel(xx, yy, True, cx, cy, inv_r2, rec, col, a, is_add, energy, accA,
+                                  accB, dep, base, W)
+
+    @ti.func
+    def block(Bn: ti.template(), bx, by, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy,
+              accA: ti.template(), accB: ti.template(), dep: ti.template(), base, W):
+        """A Bn×Bn pixel block from (bx, by), unrolled at compile time (Taichi's dynamic inner
+        loops cost more than the pixel work of a 1–3 px sprite); lanes past (x1, y1) add zero."""
+        for dy in ti.static(range(Bn)):
+            for dx in ti.static(range(Bn)):
+                inside = bx + dx <= x1 and by + dy <= y1
+                pixel(ti.min(bx + dx, x1), ti.min(by + dy, y1), inside, cx, cy, inv_r2, rec, col, a,
+                      is_add, energy, accA, accB, dep, base, W)
+
+    @ti.func
+    def pixel(xx, yy, inside, cx, cy, inv_r2, rec, col, a, is_add, energy, accA: ti.template(),
+              accB: ti.template(), dep: ti.template(), base, W):
+        """One pixel of a sprite: additive light touches only accA's RGB, an alpha sprite accA's T
+        and accB (plain load + store, not +=: one thread owns the tile, and += on an array in a
+        parallel loop compiles to an atomic)."""
+        k = base + yy * W + xx
+        w = ti.select(inside, disc_weight(xx, yy, cx, cy, inv_r2, rec[3], dep[k], energy, rec[14]), 0.0)
+        if is_add:
+            if ti.static(uses_add):
+                accA[k] = accA[k] + ti.Vector([col[0], col[1], col[2], 0.0]) * (a * w)
+        else:
+            if ti.static(uses_alpha):
+                A, B = add_sprite(accA[k], accB[k], w, col, a, False, rec[11], False, True)
+                accA[k] = A
+                accB[k] = B
+
+    @ti.func
+    def splat_tile(t, px0, py0, px1, py1, pairs: ti.template(), tile_count: ti.template(),
+                   tile_start: ti.template(), accA: ti.template(), accB: ti.template(),
+                   dep: ti.template(), base, W):
+        """Clear a tile's accumulators and add its sprites, in slot order (per-tile schedule)."""
+        for y in range(py0, py1 + 1):
+            for x in range(base + y * W + px0, base + y * W + px1 + 1):
+                accA[x] = EMPTY_LAYER
+                if ti.static(uses_alpha):
+                    accB[x] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        for j in range(tile_start[t], tile_start[t] + tile_count[t]):
+            deposit(px0, py0, px1, py1, pairs[j], accA, accB, dep, base, W)
+
+    @ti.func
+    def splat_pixel(t, px, py, pairs: ti.template(), tile_count: ti.template(),
+                    tile_start: ti.template(), z_here):
+        """(A, B) of one pixel from its tile's list, in registers (per-pixel schedule)."""
+        A = EMPTY_LAYER
+        B = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        for j in range(tile_start[t], tile_start[t] + tile_count[t]):
+            rec = pairs[j]
+            x0, y0, x1, y1 = record_box(rec)
+            if px + 1.0 >= x0 and px <= x1 and py + 1.0 >= y0 and py <= y1:
+                col = ti.Vector([rec[4], rec[5], rec[6]])
+                inv_r2 = 1.0 / (rec[2] * rec[2])
+                cx, cy, a = rec[0], rec[1], rec[7]
+                if rec[12] < 0:
+                    qx, qy, fade = capsule_point(px, py, rec)
+                    cx, cy, a = qx, qy, a * fade
+                w = disc_weight(px, py, cx, cy, inv_r2, rec[3], z_here, rec[8], rec[14])
+                A, B = add_sprite(A, B, w, col, a, rec[13] != 0.0, rec[11], uses_add, uses_alpha)
+        return A, B
+
+    @ti.func
+    def lo_near(px0, py0, px1, py1, touched_lo: ti.template(), Wl, Hl, TXl, s):
+        """Whether any reduced-layer tile the upsample reads for this tile holds sprites."""
+        lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * s - 0.5), ti.i32))
+        lx1 = ti.min(Wl - 1, ti.cast(ti.floor((px1 + 0.5) * s - 0.5), ti.i32) + 1)
+        ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * s - 0.5), ti.i32))
+        ly1 = ti.min(Hl - 1, ti.cast(ti.floor((py1 + 0.5) * s - 0.5), ti.i32) + 1)
+        near = 0
+        for ly in range(ly0 // TILE, ly1 // TILE + 1):
+            for lx in range(lx0 // TILE, lx1 // TILE + 1):
+                near |= touched_lo[ly * TXl + lx]
+        return near
+
+    @ti.func
+    def acc_layer(accA: ti.template(), accB: ti.template(), k, shading):
+        B = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        if ti.static(uses_alpha):
+            B = accB[k]
+        return layer(accA[k], B, shading)
+
+    @ti.kernel
+    def splat_tiles(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4, accB: ND_V4,
+                    dep: ND_F, touched_lo: ND_I1, T0: ti.i32, TX: ti.i32, W: ti.i32, H: ti.i32,
+                    T1: ti.i32, TXl: ti.i32, Wl: ti.i32, Hl: ti.i32, shading: ti.f32):
+        """Per tile of both levels (the CPU's schedule): clear and splat the tile's sprites into
+        the accumulators. A reduced-level tile then resolves each texel to its layer (RGB, T) in
+        place; one emptied since the last frame is reset to the empty layer, so the upsample may
+        read any texel without asking whether its tile was drawn."""
+        ti.loop_config(block_dim=1)
+        for t in range(T0 + T1):
+            lvl = t >= T0
+            tt, tx_n, Wc, Hc, base = t, TX, W, H, 0
+            if lvl:
+                tt, tx_n, Wc, Hc, base = t - T0, TXl, Wl, Hl, W * H
+            n = tile_count[t]
+            px0, py0 = (tt % tx_n) * TILE, (tt // tx_n) * TILE
+            px1, py1 = ti.min(Wc - 1, px0 + TILE - 1), ti.min(Hc - 1, py0 + TILE - 1)
+            if n > 0:
+                splat_tile(t, px0, py0, px1, py1, pairs, tile_count, tile_start, accA, accB, dep, base, Wc)
+            if lvl:
+                if n > 0 or touched_lo[tt] != 0:
+                    for y in range(py0, py1 + 1):
+                        for k in range(base + y * Wc + px0, base + y * Wc + px1 + 1):
+                            v = EMPTY_LAYER
+                            if n > 0:
+                                v = acc_layer(accA, accB, k, shading)
+                            accA[k] = v
+                touched_lo[tt] = ti.select(n > 0, 1, 0)
+
+    @ti.kernel
+    def splat_pixels_lo(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,
+                        dep: ND_F, touched_lo: ND_I1, T0: ti.i32, W: ti.i32, H: ti.i32, T1: ti.i32,
+                        TXl: ti.i32, Wl: ti.i32, Hl: ti.i32, shading: ti.f32):
+        """The reduced level per texel (the GPU's schedule; the same layer as ``splat_tiles``)."""
+        for t in range(T1):
+            touched_lo[t] = ti.select(tile_count[T0 + t] > 0, 1, 0)
+        for py, px in ti.ndrange(Hl, Wl):
+            k = W * H + py * Wl + px
+            A, B = splat_pixel(T0 + (py // TILE) * TXl + px // TILE, px, py, pairs, tile_count,
+                               tile_start, dep[k])
+            accA[k] = layer(A, B, shading)
+
+    @ti.kernel
+    def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32):
+        """The reduced layer's rows interpolated along x at every full-resolution column:
+        rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
+        vertical half with two loads per pixel instead of four)."""
+        LO = W * H
+        for j in range(Hl):
+            for x in range(W):
+                u = (x + 0.5) * s - 0.5
+                i0 = ti.cast(ti.floor(u), ti.i32)
+                fx = u - i0
+                xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+                rows[j * W + x] = (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
+
+    @ti.kernel
+    def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, bgc: ND_V4, dep: ND_F,
+                        bg_packed: ND_U32, out: ND_U32, dirty: ND_I1, touched_lo: ND_I1,
+                        TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32, Wl: ti.i32,
+                        Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32, shading: ti.f32,
+                        mode: ti.i32):
+        """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
+        the background, tone-mapped and packed. An untouched tile copies the packed background."""
+        ti.loop_config(block_dim=1)
+        for t in range(TX * TY):
+            px0, py0 = (t % TX) * TILE, (t // TX) * TILE
+            px1, py1 = ti.min(W - 1, px0 + TILE - 1), ti.min(H - 1, py0 + TILE - 1)
+            n = tile_count[t]
+            near = 0
+            if has_lo != 0:
+                near = lo_near(px0, py0, px1, py1, touched_lo, Wl, Hl, TXl, s)
+            if n == 0 and near == 0 and dirty[t] == 0:
+                for y in range(py0, py1 + 1):
+                    for k in range(y * W + px0, y * W + px1 + 1):
+                        out[k] = bg_packed[k]
+            else:
+                edge = 0
+                if near != 0:
+                    edge = lo_edge(px0, py0, px1, py1, dep, W * H, Wl, Hl, s)
+                if n == 0 and edge == 0 and near != 0:
+                    # the common case under smoke: the reduced layer alone, bilinear; the row
+                    # terms hoisted by hand (two loads and a lerp per pixel)
+                    for y in range(py0, py1 + 1):
+                        v = (y + 0.5) * s - 0.5
+                        j0 = ti.cast(ti.floor(v), ti.i32)
+                        fy = v - j0
+                        ra = ti.min(ti.max(j0, 0), Hl - 1) * W
+                        rb = ti.min(ti.max(j0 + 1, 0), Hl - 1) * W
+                        for x in range(px0, px1 + 1):
+                            low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
+                            out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
+                                                    mode)
+                else:
+                    for y in range(py0, py1 + 1):
+                        for x in range(px0, px1 + 1):
+                            k = y * W + x
+                            full = EMPTY_LAYER
+                            if n > 0:
+                                full = acc_layer(accA, accB, k, shading)
+                            low = EMPTY_LAYER
+                            if near != 0:
+                                low = lo_sample(x, y, dep[k], accA, rows, dep, W * H, W, Wl, Hl, s,
+                                                edge)
+                            out[k] = finish(bgc[k], low, full, exposure, mode)
+
+    @ti.kernel
+    def composite_pixels(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,
+                         rows: ND_V4, bgc: ND_V4, dep: ND_F, bg_packed: ND_U32, out: ND_U32, dirty: ND_I1,
+                         touched_lo: ND_I1, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
+                         Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
+                         shading: ti.f32, mode: ti.i32):
+        """Full resolution per pixel (the GPU's schedule, after 3DGS): splat in registers, then
+        the same composite as ``composite_tiles``."""
+        for py, px in ti.ndrange(H, W):
+            tx, ty = px // TILE, py // TILE
+            t = ty * TX + tx
+            k = py * W + px
+            near = 0
+            if has_lo != 0:
+                near = lo_near(tx * TILE, ty * TILE, ti.min(W - 1, tx * TILE + TILE - 1),
+                               ti.min(H - 1, ty * TILE + TILE - 1), touched_lo, Wl, Hl, TXl, s)
+            if tile_count[t] == 0 and near == 0 and dirty[t] == 0:
+                out[k] = bg_packed[k]
+            else:
+                full = EMPTY_LAYER
+                if tile_count[t] > 0:
+                    A, B = splat_pixel(t, px, py, pairs, tile_count, tile_start, dep[k])
+                    full = layer(A, B, shading)
+                low = EMPTY_LAYER
+                if near != 0:
+                    edge = lo_edge(tx * TILE, ty * TILE, ti.min(W - 1, tx * TILE + TILE - 1),
+                                   ti.min(H - 1, ty * TILE + TILE - 1), dep, W * H, Wl, Hl, s)
+                    low = lo_sample(px, py, dep[k], accA, rows, dep, W * H, W, Wl, Hl, s, edge)
+                out[k] = finish(bgc[k], low, full, exposure, mode)
+
+    @ti.kernel
+    def pack_background(bgc: ND_V4, bg_packed: ND_U32, n: ti.i32, exposure: ti.f32,
+                        mode: ti.i32):
+        """The background alone, tone-mapped and packed: what an untouched tile copies."""
+        for k in range(n):
+            bg_packed[k] = finish(bgc[k], EMPTY_LAYER, EMPTY_LAYER, exposure, mode)
+
+    return dict(splat_tiles=splat_tiles, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
+                composite_tiles=composite_tiles, composite_pixels=composite_pixels,
+                pack_background=pack_background)

@@ -1,0 +1,166 @@
+"""The off-screen renderer: a scene's particles and soft bodies as an (H, W, 4) uint8 RGBA image.
+
+A frame, each step one kernel (PERF-NOTES: a launch costs ~17 µs; nothing here loops in Python
+over particles or pixels):
+1. background (``background.py``) — only when the camera, colliders or size changed;
+2. soft bodies (``mesh.py``) into the frame's own background and depth, only where they are;
+3. sprites (``sprites.py``): every live particle → a sprite record, at full or reduced resolution;
+4. binning (``binning.py``): a stable counting sort of sprites into 16×16 tiles;
+5. the reduced buffer's tile pass, then the full-resolution tile pass that splats, composites with
+   the upsampled reduced buffer, tone-maps and writes packed RGBA (``composite.py``).
+
+Kernels are built once per scene (they compile in only the blend modes, colliders and bodies the
+scene has); every image-sized array is an ndarray argument held per size in ``FrameTargets``, so
+rendering at a new size, another camera or a transparent overlay compiles nothing. Frames are
+byte-identical run to run and for any CPU thread count: no float is summed by two threads.
+"""
+from __future__ import annotations
+
+import numpy as np
+import taichi as ti
+
+from .background import build_background_kernel, copy_background, downsample_depth
+from .binning import build_binning_kernels, chunks_for
+from .composite import build_composite_kernels
+from .sprites import Look, SpriteRecords, build_sprite_kernel
+from .targets import FrameTargets, packed_view
+
+SCHEDULES = ("tiles", "pixels")
+RESOLUTIONS = {"auto": None, "1": 1.0, "0.5": 0.5, "0.25": 0.25}
+# "auto": no reduced buffer below 360 rows, ½ up to 720, ¼ from 720 (sprites there are ≥ 8 px)
+AUTO_SCALES = ((360, 1.0), (720, 0.5))
+
+
+def _arch_is_cpu() -> bool:
+    from taichi.lang import impl
+
+    return impl.current_cfg().arch in (ti.x64, ti.arm64)
+
+
+def particle_scale(setting, height: int) -> float:
+    """The reduced buffer's scale for ``[render] particle_resolution`` at an image height."""
+    if setting in (None, "auto"):
+        for below, scale in AUTO_SCALES:
+            if height < below:
+                return scale
+        return 0.25
+    return float(setting)
+
+
+class Renderer:
+    """Draws one scene. ``state``/``emitter_configs`` may be None/empty (a soft-body scene: no
+    sprite kernels are built); ``bodies`` are drawn as meshes and lines."""
+
+    def __init__(self, state, emitter_configs, colliders, render_cfg, bodies=(), schedule=None):
+        self.cfg = render_cfg
+        self.shading = float(render_cfg.density_shading)
+        self.colliders = colliders
+        self.cpu = _arch_is_cpu()
+        self.schedule = schedule or ("tiles" if self.cpu else "pixels")
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"schedule: unknown value {self.schedule!r}; allowed: {', '.join(SCHEDULES)}")
+        self.chunks = chunks_for(self.cpu)
+        self.has_particles = state is not None and len(emitter_configs) > 0
+        self._background = build_background_kernel(render_cfg, colliders)
+        uses_add = uses_alpha = False
+        if self.has_particles:
+            self.look = Look(emitter_configs)
+            uses_add, uses_alpha = self.look.uses_additive, self.look.uses_alpha
+            self.records = SpriteRecords(state.capacity)
+            self._sprites = build_sprite_kernel(state, self.look, self.records)
+            self._count, self._offsets, self._starts, self._scatter = build_binning_kernels(
+                self.records, state.capacity, self.chunks)
+            self.capacity = state.capacity
+        self.uses_alpha = uses_alpha
+        self._k = build_composite_kernels(uses_add, uses_alpha)
+        self.mesh = None
+        if bodies:
+            from .mesh import MeshLayer
+
+            self.mesh = MeshLayer(bodies)
+        self._targets = {}
+        self.last_pairs = 0
+
+    # -- per-size arrays ------------------------------------------------------------------------
+    def targets(self, width: int, height: int) -> FrameTargets:
+        W, H = int(width), int(height)
+        scale = particle_scale(getattr(self.cfg, "particle_resolution", "auto"), H)
+        key = (W, H, scale if self.has_particles else 1.0)
+        t = self._targets.get(key)
+        if t is None:
+            cap = self.capacity if self.has_particles else 1
+            t = FrameTargets(W, H, key[2], self.chunks, alpha=self.uses_alpha, mesh=self.mesh is not None,
+                             pairs=max(1 << 14, int(1.5 * cap)))
+            self._targets[key] = t
+        return t
+
+    def _background_key(self, cam, show):
+        placed = b"" if self.colliders is None else self.colliders.placement()
+        return (tuple(tuple(float(x) for x in a) for a in cam[:4]), float(cam[4]), bool(show), placed)
+
+    # -- a frame ------------------------------------------------------------------------------
+    def render(self, camera, width=None, height=None, *, out=None, exposure=None, show_colliders=None,
+               transparent=False, bgra=False) -> np.ndarray:
+        """The scene seen by ``camera`` as an (H, W, 4) uint8 RGBA image (``out`` if given: a
+        C-contiguous uint8 array of that shape, written in place; else a new array). Opaque
+        unless ``transparent``: then premultiplied, alpha 0 where only background would show.
+        ``bgra``: bytes in B, G, R, A order (what X11, SDL and Taichi's fast GUI blit directly)."""
+        W = int(width or self.cfg.width)
+        H = int(height or self.cfg.height)
+        image = out if out is not None else np.empty((H, W, 4), np.uint8)
+        packed = packed_view(image, W, H)
+        t = self.targets(W, H)
+        p, f, r, u = camera.basis()
+        cam = (p.tolist(), f.tolist(), r.tolist(), u.tolist(), float(camera.tan_half))
+        show = self.cfg.show_colliders if show_colliders is None else bool(show_colliders)
+        exposure = float(self.cfg.exposure if exposure is None else exposure)
+        mode = int(bool(transparent)) | (2 if bgra else 0)
+        key = self._background_key(cam, show)
+        redrawn = key != t.bg_key
+        if redrawn:
+            self._background(t.bgc, t.depth, *cam, W, H, int(show))
+            t.bg_key = key
+            if t.mesh:
+                copy_background(t.fbg, t.fdep, t.bgc, t.depth, H * W)
+        if (key, exposure, mode) != t.packed_key:
+            self._k["pack_background"](t.bgc, t.bg_packed, H * W, exposure, mode)
+            t.packed_key = (key, exposure, mode)
+        bgc, dep = t.bgc, t.depth
+        if self.mesh is not None:
+            self.mesh.update()
+            self.mesh.draw(t, cam)
+            bgc, dep = t.fbg, t.fdep
+        if t.has_lo and (redrawn or self.mesh is not None):
+            downsample_depth(dep, W, H, t.Wl, t.Hl, round(1 / t.scale))
+        has_lo = self._splat(t, cam, dep) if self.has_particles else 0
+        common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
+        if has_lo:
+            self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale)
+        if self.schedule == "tiles":
+            self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, bgc, dep, t.bg_packed,
+                                       packed, t.dirty, t.touched_lo, *common)
+        else:
+            self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,
+                                        dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)
+        return image
+
+    def _splat(self, t: FrameTargets, cam, dep) -> int:
+        """Sprites, binning, and the splat (per tile: both levels; per pixel: the reduced level,
+        the full one is splatted in the composite); returns whether the reduced level is used."""
+        W, H = t.W, t.H
+        lo_min = 2.0 / t.scale if t.has_lo else 1e30  # a reduced sprite is at least 2 texels wide
+        self._sprites(*cam, W, H, t.scale, lo_min)
+        self._count(t.hist, t.T, t.T0, t.TX, t.TXl)
+        self._offsets(t.hist, t.tile_count, t.block_sum, t.T, t.NB)
+        total = int(self._starts(t.tile_count, t.tile_start, t.block_sum, t.T, t.NB))
+        if total > t.pair_capacity:  # an ndarray: growing it recompiles nothing
+            t.grow_pairs(int(total * 1.25) + 1024)
+        self.last_pairs = total
+        self._scatter(t.pairs, t.hist, t.tile_start, t.T0, t.TX, t.TXl)
+        if self.schedule == "tiles":
+            self._k["splat_tiles"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep,
+                                   t.touched_lo, t.T0, t.TX, W, H, t.T1, t.TXl, t.Wl, t.Hl, self.shading)
+        elif t.has_lo:
+            self._k["splat_pixels_lo"](t.pairs, t.tile_count, t.tile_start, t.accA, dep, t.touched_lo,
+                                       t.T0, W, H, t.T1, t.TXl, t.Wl, t.Hl, self.shading)
+        return int(t.has_lo)

@@ -1,0 +1,97 @@
+"""Everything a frame of one image size needs, as Taichi ndarrays: the kernels take them as
+arguments, so a new render size allocates arrays and compiles nothing (fields passed as
+``ti.template()`` would re-specialise every kernel).
+
+Per pixel (H·W,), flat in row-major order: ``bgc`` vec4 (background RGB, coverage 0) and ``depth`` f32 (m) — kept while the
+camera, colliders and size stay; ``bg_packed`` u32, the background tone-mapped (what an untouched
+tile copies). The splat arrays hold the full level's W·H pixels and then the reduced level's
+Wl·Hl texels (Hl, Wl = ceil(scale · (H, W))): ``depth`` (the reduced part: the farthest depth under
+each texel), ``accA``/``accB`` vec4 splat accumulators (engine.render.splat), written only in tiles
+that hold sprites (the reduced part ends as the layer (RGB, T)); ``touched_lo`` (T1,) reduced
+tiles holding sprites. Tiles: ``hist``
+(chunks, T) i32, ``tile_count``/``tile_start`` (T,), ``block_sum``, ``pairs`` (grows). Soft bodies:
+``vis`` i64 visibility buffer, ``lines`` ivec4 line sums, ``fbg``/``fdep`` the frame's background
+with the bodies drawn in, ``dirty``/``dirty_prev`` (T0,) tiles the bodies touch.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from .binning import SCAN_BLOCK, vec16
+from .sprites import TILE
+
+vec4 = ti.types.vector(4, ti.f32)
+ivec4 = ti.types.vector(4, ti.i32)
+
+
+
+def tiles_for(W: int, H: int):
+    return (W + TILE - 1) // TILE, (H + TILE - 1) // TILE
+
+
+def reduced_size(W: int, H: int, scale: float):
+    return max(1, math.ceil(W * scale)), max(1, math.ceil(H * scale))
+
+
+class FrameTargets:
+    def __init__(self, W: int, H: int, scale: float, chunks: int, *, alpha: bool, mesh: bool,
+                 pairs: int = 1 << 16):
+        self.W, self.H, self.scale = int(W), int(H), float(scale)
+        self.TX, self.TY = tiles_for(W, H)
+        self.T0 = self.TX * self.TY
+        self.has_lo = scale < 1.0
+        self.Wl, self.Hl = reduced_size(W, H, scale) if self.has_lo else (1, 1)
+        self.TXl, self.TYl = tiles_for(self.Wl, self.Hl) if self.has_lo else (1, 1)
+        self.T1 = self.TXl * self.TYl if self.has_lo else 0
+        self.T = self.T0 + self.T1
+        self.NB = (self.T + SCAN_BLOCK - 1) // SCAN_BLOCK
+        px = H * W  # pixel arrays are flat: (H·W,), indexed y·W + x
+        both = px + self.Wl * self.Hl  # splat arrays: the full level, then the reduced one
+        self.bgc = ti.ndarray(vec4, shape=px)
+        self.depth = ti.ndarray(ti.f32, shape=both)
+        self.bg_packed = ti.ndarray(ti.u32, shape=px)
+        self.accA = ti.ndarray(vec4, shape=both)
+        self.accA.fill(ti.Vector([0.0, 0.0, 0.0, 1.0]))  # the empty layer (see composite.splat_tiles)
+        self.accB = ti.ndarray(vec4, shape=both if alpha else 1)
+        self.lo_rows = ti.ndarray(vec4, shape=self.Hl * W if self.has_lo else 1)
+        self.touched_lo = ti.ndarray(ti.i32, shape=max(1, self.T1))
+        self.touched_lo.fill(0)
+        self.hist = ti.ndarray(ti.i32, shape=(chunks, self.T))
+        self.tile_count = ti.ndarray(ti.i32, shape=self.T)
+        self.tile_count.fill(0)  # (a scene without particles never bins: every tile stays empty)
+        self.tile_start = ti.ndarray(ti.i32, shape=self.T)
+        self.block_sum = ti.ndarray(ti.i32, shape=self.NB)
+        self.dirty = ti.ndarray(ti.i32, shape=self.T0)
+        self.dirty.fill(0)
+        self.pairs = None
+        self.grow_pairs(pairs)
+        self.mesh = mesh
+        if mesh:
+            self.vis = ti.ndarray(ti.i64, shape=px)
+            self.lines = ti.ndarray(ivec4, shape=px)
+            self.fbg = ti.ndarray(vec4, shape=px)
+            self.fdep = ti.ndarray(ti.f32, shape=both)
+            self.dirty_prev = ti.ndarray(ti.i32, shape=self.T0)
+            self.dirty_prev.fill(0)
+        self.bg_key = None  # what the background arrays were drawn for
+        self.packed_key = None  # (bg_key, exposure, transparent) of bg_packed
+
+    def grow_pairs(self, n: int) -> None:
+        self.pairs = ti.ndarray(vec16, shape=max(1, int(n)))
+        self.pair_capacity = max(1, int(n))
+
+    def new_image(self) -> np.ndarray:
+        return np.empty((self.H, self.W, 4), np.uint8)
+
+
+def packed_view(image: np.ndarray, W: int, H: int, name: str = "out") -> np.ndarray:
+    """The flat (H·W,) uint32 view of an (H, W, 4) uint8 RGBA array the kernels write into."""
+    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.shape != (H, W, 4):
+        got = f"{getattr(image, 'dtype', type(image).__name__)} {getattr(image, 'shape', '')}"
+        raise ValueError(f"{name}: need a uint8 array of shape ({H}, {W}, 4), got {got}")
+    if not image.flags.c_contiguous:
+        raise ValueError(f"{name}: need a C-contiguous array (np.empty((H, W, 4), np.uint8))")
+    return image.view(np.uint32).reshape(H * W)

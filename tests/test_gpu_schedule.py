@@ -1,0 +1,121 @@
+"""No kernel launched per frame runs serialised: on a GPU a serialised kernel (or a top-level
+loop over one index) is one thread, however many the device has.
+
+Two checks: every kernel in the core's source is read (fast; the one serial kernel allowed is the
+ODE driver's fixed-step loop, which integrates one small state through time and is never part of
+a frame), and (slow) every shipped config is stepped and rendered while kernel launches are
+recorded, and each launched kernel's source is read."""
+import ast
+import glob
+import inspect
+import os
+import textwrap
+
+import pytest
+from taichi.lang import kernel_impl
+
+from engine.api import ParticleScene
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIGS = sorted(glob.glob(os.path.join(ROOT, "configs", "*.toml")))
+
+
+def serial_parts(source: str):
+    """Why a kernel's source runs serially: a ``loop_config(serialize=True)`` or a top-level
+    ``for`` over ``range(1)`` (a common way to force one thread); empty if neither."""
+    tree = ast.parse(textwrap.dedent(source))
+    fn = next(n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef))
+    found = []
+    for node in ast.walk(fn):
+        if isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "loop_config":
+            for kw in node.keywords:
+                if kw.arg == "serialize" and getattr(kw.value, "value", False) is True:
+                    found.append("loop_config(serialize=True)")
+    for stmt in fn.body:
+        if isinstance(stmt, ast.For) and isinstance(stmt.iter, ast.Call) \
+                and getattr(stmt.iter.func, "id", "") == "range":
+            args = [getattr(a, "value", None) for a in stmt.iter.args]
+            if args in ([1], [0, 1]):
+                found.append("top-level loop over a single index")
+    return found
+
+
+def launched_per_frame(path, frames=2):
+    """The kernels (Python functions) launched while stepping and rendering ``frames`` frames,
+    after one warm-up frame (which may run one-time set-up kernels)."""
+    scene = ParticleScene.from_file(path)
+    scene.step(1 / 60)
+    scene.render(160, 90)
+    seen = {}
+    original = kernel_impl.Kernel.__call__
+
+    def record(self, *args, **kwargs):
+        seen[self.func.__qualname__] = self.func
+        return original(self, *args, **kwargs)
+
+    kernel_impl.Kernel.__call__ = record
+    try:
+        for _ in range(frames):
+            scene.step(1 / 60)
+            scene.render(160, 90)
+    finally:
+        kernel_impl.Kernel.__call__ = original
+    return seen
+
+
+def test_the_checker_sees_planted_serial_kernels():
+    planted = '''
+def k(n: int):
+    ti.loop_config(serialize=True)
+    for i in range(n):
+        pass
+    for _ in range(1):
+        pass
+'''
+    assert serial_parts(planted) == ["loop_config(serialize=True)", "top-level loop over a single index"]
+    assert serial_parts("def k(n: int):\n    for i in range(n):\n        x = 1\n") == []
+
+
+# kernels allowed to be serial, by qualified name, with why (none of them runs in a frame)
+ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE state stepped in time"}
+
+
+def kernels_in_source(root):
+    """(module path, qualified name, source) of every @ti.kernel function under ``root``."""
+    out = []
+    for path in glob.glob(os.path.join(root, "**", "*.py"), recursive=True):
+        with open(path, encoding="utf-8") as fh:
+            src = fh.read()
+        tree = ast.parse(src)
+        stack = [(tree, "")]
+        while stack:
+            node, prefix = stack.pop()
+            for child in ast.iter_child_nodes(node):
+                if isinstance(child, (ast.FunctionDef, ast.ClassDef)):
+                    q = f"{prefix}{child.name}"
+                    if isinstance(child, ast.FunctionDef) and any(
+                            getattr(d, "attr", getattr(d, "id", "")) == "kernel" for d in child.decorator_list):
+                        out.append((path, q, ast.get_source_segment(src, child)))
+                    inner = f"{q}.<locals>." if isinstance(child, ast.FunctionDef) else f"{q}."
+                    stack.append((child, inner))
+                else:
+                    stack.append((child, prefix))
+    return out
+
+
+def test_no_kernel_in_the_core_is_serialised():
+    core = [k for k in kernels_in_source(os.path.join(ROOT, "engine"))
+            if os.sep + "tools" + os.sep not in k[0]]
+    assert len(core) > 20  # the scan found the kernels
+    bad = {q: why for _, q, src in core if (why := serial_parts(src)) and q not in ALLOWED}
+    assert bad == {}, bad
+    assert set(ALLOWED) <= {q for _, q, _ in core}  # the allow-list names kernels that exist
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", CONFIGS, ids=[os.path.basename(p)[:-5] for p in CONFIGS])
+def test_no_kernel_launched_per_frame_is_serialised(path):
+    seen = launched_per_frame(path)
+    assert seen, "no kernels recorded"
+    bad = {name: why for name, fn in seen.items() if (why := serial_parts(inspect.getsource(fn)))}
+    assert bad == {}, bad

@@ -1,0 +1,163 @@
+"""The renderer: two schedules, one image; determinism; sizes, cameras and overlays without
+recompiling; the reduced-resolution layer; what the output array holds."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from engine.api import ParticleScene
+from engine.config import load_config, read_toml
+from engine.render.renderer import Renderer, particle_scale
+from engine.scene import Scene
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _scene(path, frames=20, size=(160, 90), **render):
+    cfg = load_config(os.path.join(ROOT, path), {f"render.{k}": v for k, v in render.items()})
+    s = Scene(cfg, width=size[0], height=size[1])
+    for _ in range(frames):
+        s.advance_frame()
+    return s
+
+
+def _other_schedule(s, schedule):
+    p = s.particles
+    return Renderer(p.state if p else None, s.cfg.emitters, s.colliders, s.cfg.render,
+                    bodies=s.bodies, schedule=schedule)
+
+
+@pytest.mark.parametrize("path, res", [("configs/sparks.toml", 1), ("configs/dust.toml", 0.5),
+                                       ("configs/campfire.toml", 0.25)])
+def test_per_pixel_schedule_draws_the_per_tile_image(path, res):
+    """The GPU's schedule (a thread per pixel, registers) and the CPU's (a thread per tile,
+    sprite-major) add the same sprites to each pixel in the same order: the same image but for
+    compiler rounding (fast math may fuse differently in the two kernels)."""
+    s = _scene(path, size=(192, 108), particle_resolution=res)
+    tiles = s.render()
+    pixels = _other_schedule(s, "pixels").render(s.camera, 192, 108)
+    diff = np.abs(tiles.astype(int) - pixels.astype(int))
+    assert tiles[..., :3].std() > 3  # something was drawn
+    assert diff.max() <= 1 and (diff > 0).mean() < 2e-3, (diff.max(), (diff > 0).mean())
+    if res != 1:
+        assert s.renderer.targets(192, 108).has_lo
+
+
+_PROBE = """
+import hashlib, sys
+from engine import runtime
+runtime.init("cpu", threads=int(sys.argv[1]))
+from engine.config import load_config
+from engine.scene import Scene
+s = Scene(load_config("configs/campfire.toml", {"render.particle_resolution": 0.5}), width=200, height=120)
+h = hashlib.sha256()
+for _ in range(12):
+    s.advance_frame()
+    h.update(s.render().tobytes())
+print(h.hexdigest())
+"""
+
+
+def test_frames_are_byte_identical_across_thread_counts():
+    env = dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=ROOT)
+    out = [subprocess.run([sys.executable, "-c", _PROBE, str(n)], cwd=ROOT, env=env, text=True,
+                          capture_output=True, timeout=300) for n in (1, 2)]
+    for o in out:
+        assert o.returncode == 0, o.stderr[-2000:]
+    digests = {o.stdout.strip().splitlines()[-1] for o in out}
+    assert len(digests) == 1, digests
+
+
+def _compiled(renderer):
+    """How many kernel instances the renderer's kernels have compiled so far."""
+    kernels = [renderer._background, *renderer._k.values()]
+    if renderer.has_particles:
+        kernels += [renderer._sprites, renderer._count, renderer._offsets, renderer._starts,
+                    renderer._scatter]
+    return sum(len(k._primal.compiled_kernels) for k in kernels)
+
+
+def test_new_sizes_cameras_and_overlays_compile_nothing():
+    s = _scene("configs/sparks.toml", frames=5, size=(128, 72))
+    r = s.renderer
+    s.render()
+    s.render(transparent=True)
+    before = _compiled(r)
+    for w, h in ((200, 100), (64, 200), (131, 77)):
+        img = s.render(w, h, transparent=(w == 64))
+        assert img.shape == (h, w, 4) and img[..., :3].max() > 0
+    moved = s.camera.__class__((0.3, 1.8, 5.0), s.camera.look_at, s.camera.fov)
+    s.render(camera=moved)
+    assert _compiled(r) == before
+
+
+def test_background_is_redrawn_when_camera_or_colliders_move():
+    s = _scene("configs/sparks.toml", frames=5)
+    first = s.render()
+    assert np.array_equal(s.render(), first)  # kept background
+    moved = s.camera.__class__((0.3, 1.8, 5.0), s.camera.look_at, s.camera.fov)
+    assert not np.array_equal(s.render(camera=moved), first)
+    assert np.array_equal(s.render(), first)
+    pos = s.colliders.collider_point.to_numpy()[: s.colliders.count]
+    s.colliders.move_to(s.t + 0.1, pos + np.array([0.0, 0.3, 0.0], np.float32))
+    cached = s.render()
+    assert not np.array_equal(cached, first)
+    s.renderer.targets(s.width, s.height).bg_key = None  # force a full redraw
+    assert np.array_equal(cached, s.render())  # the move had been noticed
+
+
+def test_pair_list_grows_without_changing_the_image():
+    s = _scene("configs/sparks.toml", frames=15)
+    ref = s.render()
+    t = s.renderer.targets(s.width, s.height)
+    t.grow_pairs(16)
+    assert np.array_equal(s.render(), ref)
+    assert t.pair_capacity >= s.renderer.last_pairs > 16
+
+
+def test_reduced_layer_stays_close_to_full_resolution():
+    """Smoke drawn into the ¼-resolution layer and upsampled looks like smoke drawn at full
+    resolution: small differences, spread thin, no shift in overall brightness."""
+    full = _scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=1)
+    quarter = _scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=0.25)
+    a = full.render()[..., :3].astype(float)
+    b = quarter.render()[..., :3].astype(float)
+    assert quarter.renderer.targets(320, 180).has_lo and not full.renderer.targets(320, 180).has_lo
+    diff = np.abs(a - b)
+    assert a.std() > 3 and diff.mean() < 1.5 and np.percentile(diff, 99) < 16, (diff.mean(), np.percentile(diff, 99))
+    assert abs(a.mean() - b.mean()) < 1.0
+
+
+def test_auto_resolution_follows_the_image_height():
+    assert particle_scale("auto", 180) == 1.0
+    assert particle_scale("auto", 360) == 0.5
+    assert particle_scale("auto", 720) == 0.25
+    assert particle_scale(0.5, 4000) == 0.5 and particle_scale(1, 4000) == 1.0
+
+
+def test_transparent_overlay_is_premultiplied_with_alpha_zero_where_nothing_is_drawn():
+    d = read_toml(os.path.join(ROOT, "configs", "campfire.toml"))
+    s = ParticleScene.from_dict(d)
+    for _ in range(20):
+        s.step(1 / 30)
+    opaque = s.render(160, 90)
+    over = s.render(160, 90, transparent=True)
+    assert np.all(opaque[..., 3] == 255)
+    empty = np.all(over[..., :3] == 0, axis=-1)
+    assert empty.mean() > 0.3 and np.all(over[empty, 3] == 0)  # background left out
+    assert np.all(over[..., :3] <= np.maximum(over[..., 3:], over[..., :3]).max())
+    lit = over[..., :3].max(-1) > 40
+    assert lit.any() and (over[lit, 3] < 255).any()  # additive light adds (alpha below 1)
+
+
+def test_render_into_a_given_array_and_refuse_a_wrong_one():
+    s = _scene("configs/sparks.toml", frames=5, size=(96, 54))
+    out = np.zeros((54, 96, 4), np.uint8)
+    got = s.render(out=out)
+    assert got is out and out[..., :3].max() > 0 and np.array_equal(out, s.render())
+    for bad in (np.zeros((54, 96, 3), np.uint8), np.zeros((54, 96, 4), np.float32),
+                np.zeros((96, 54, 4), np.uint8), np.zeros((54, 192, 4), np.uint8)[:, ::2]):
+        with pytest.raises(ValueError, match="out"):
+            s.render(out=bad)
