@@ -11,16 +11,18 @@ EXPECTED = {
     "step": ["engine step 20k", "fused kernel alone 20k", "NumPy in-place 20k", "bandwidth limit 20k",
              "engine step 100k", "fused kernel alone 100k", "NumPy in-place 100k",
              "bandwidth limit 100k"],
-    "frame": ["frame, tiled splat", "frame, serial splat (before)", "step (advance_frame)",
-              "background", "splat, tiled", "splat, serial", "resolve + tone map", "image read-back"],
+    "frame": ["frame (step + render)", "frame, per-pixel schedule", "step (advance_frame)", "render",
+              "render, background redrawn"],
+    "effects": ["sparks", "worst effect", "empty scene, render only"],
     "ode": ["engine RK4 step doubling (f32)", "scipy solve_ivp RK45 (f64)"],
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
     "features": ["all features", "none of them"],
     "output": ["sim + render (no output)", "particles run, 1 encoder"],
 }
-# start-up runs `particles run` in subprocesses (a cold compile each) and output builds three
-# scenes: together half the quick bench's time, so they run with the slow tests
-SLOW = ("startup", "output")
+# start-up runs `particles run` in subprocesses (a cold compile each), output builds three scenes
+# and effects builds a scene per config: together most of the quick bench's time, so they run
+# with the slow tests
+SLOW = ("startup", "output", "effects")
 
 
 def check_rows(rows, sections):
@@ -47,8 +49,9 @@ def test_quick_bench_has_every_row_with_finite_positive_figures():
 
 
 @pytest.mark.slow
-def test_quick_bench_startup_and_output_sections():
+def test_quick_bench_startup_output_and_effects_sections():
     rows = bench.run(quick=True, only=list(SLOW))
     check_rows(rows, SLOW)
     ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra]
     assert len(ratios) == 2 and all(0 < q < 10 for q in ratios)
+    assert any(r.section.startswith("effects") and r.name == "worst effect" for r in rows)

@@ -9,7 +9,8 @@ import pytest
 
 from engine.api import ParticleScene
 from engine.config import load_config, read_toml
-from engine.render.renderer import Renderer, particle_scale
+from engine.render.renderer import Renderer
+from engine.render.resolution import particle_scale
 from engine.scene import Scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -22,29 +22,16 @@ import taichi as ti
 from .background import build_background_kernel, copy_background, downsample_depth
 from .binning import build_binning_kernels, chunks_for
 from .composite import build_composite_kernels
+from .resolution import particle_scale
 from .sprites import Look, SpriteRecords, build_sprite_kernel
 from .targets import FrameTargets, packed_view
 
 SCHEDULES = ("tiles", "pixels")
 RESOLUTIONS = {"auto": None, "1": 1.0, "0.5": 0.5, "0.25": 0.25}
-# "auto": no reduced buffer below 360 rows, ½ up to 720, ¼ from 720 (sprites there are ≥ 8 px)
-AUTO_SCALES = ((360, 1.0), (720, 0.5))
-
-
 def _arch_is_cpu() -> bool:
     from taichi.lang import impl
 
     return impl.current_cfg().arch in (ti.x64, ti.arm64)
-
-
-def particle_scale(setting, height: int) -> float:
-    """The reduced buffer's scale for ``[render] particle_resolution`` at an image height."""
-    if setting in (None, "auto"):
-        for below, scale in AUTO_SCALES:
-            if height < below:
-                return scale
-        return 0.25
-    return float(setting)
 
 
 class Renderer:
