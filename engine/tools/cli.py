@@ -8,6 +8,7 @@ import os
 import sys
 
 from .errors import EXIT_OK, SimulationError, UserError
+from .wedge import add_parser as add_wedge_parser
 
 
 def _cmd_ode(args) -> int:
@@ -90,7 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
     b.add_argument("--quick", action="store_true", help="small sizes (CI: well under a minute)")
     b.add_argument("--only", default=None,
-                   help="comma-separated sections: step, frame, ode, startup, features, cloth")
+                   help="comma-separated sections: step, frame, ode, startup, features, cloth, wedge")
     b.set_defaults(func=_cmd_bench)
 
     c = sub.add_parser("chart", help="work-precision, stability and energy-drift charts (PNG + CSV)")
@@ -105,6 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--frames", type=int, default=None, help="close after this many frames")
     w.add_argument("--screenshot", default=None, help="save the last frame shown to this PNG")
     w.set_defaults(func=lambda a: __import__("engine.tools.viewer", fromlist=["x"]).cmd_view(a))
+
+    add_wedge_parser(sub)
 
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
     g.add_argument("--out", default=os.path.join("renders", "gallery"))

@@ -1,0 +1,191 @@
+"""``particles wedge``: check every variant, queue them on the farm, record each result as it
+arrives, then draw the contact sheet.
+
+Exit codes: 0 when every variant is ok; 2 for bad input (checked before anything renders);
+otherwise the exit code of the first failed variant (3 diverged, 4 output failure, 137 its worker
+kept dying); 130 / 143 when stopped by SIGINT / SIGTERM (finish with ``--resume``).
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import time
+from collections import defaultdict
+
+from ..errors import OutputFailure, Stopped, UserError
+from . import record, spec
+from .farm import Farm, failure_of
+from .progress import WedgeProgress
+from .sheet import build_sheet
+
+#: thumbnails (and so contact-sheet cells) are at most this wide
+THUMB_WIDTH = 320
+_POLL = 0.05  # seconds between looks at finished variants, stop requests and the progress bar
+
+
+def _check_flags(args, wedge):
+    if args.workers is not None and args.workers < 1:
+        raise UserError(f"--workers: {args.workers} is not allowed: must be >= 1")
+    if args.workers is not None and args.scheduler:
+        raise UserError("--workers and --scheduler: choose one (the cluster at --scheduler has "
+                        "its own workers)")
+    if args.threads is not None and args.threads < 1:
+        raise UserError(f"--threads: {args.threads} is not allowed: must be >= 1")
+    if args.scheduler and "://" not in args.scheduler:
+        raise UserError(f"--scheduler: {args.scheduler!r} is not an address like tcp://host:8786")
+    k = args.sheet_frame
+    if k is not None:
+        short = min(wedge.variants, key=lambda v: v.frames)
+        if k < 0 or k >= short.frames:
+            raise UserError(f"--sheet-frame: {k} is not a frame of variant {short.id} "
+                            f"(frames 0..{short.frames - 1})")
+
+
+def _task(args, wedge, variant, out, threads) -> dict:
+    """What a worker needs for one variant: plain data (msgpack/pickle friendly)."""
+    return {"id": variant.id, "sets": [list(p) for p in variant.sets], "texts": list(variant.texts),
+            "seed": variant.seed, "config": wedge.config, "config_sha256": wedge.config_sha256,
+            "frames": wedge.frames, "size": wedge.size, "out": record.variant_dir(out, variant.id),
+            "arch": args.arch, "threads": threads, "sheet_frame": args.sheet_frame,
+            "thumb_width": THUMB_WIDTH}
+
+
+def cmd_wedge(args) -> int:
+    t_begin = time.perf_counter()
+    wedge = spec.build(args.config, args.set, args.seeds, args.frames, args.size)
+    _check_flags(args, wedge)
+    out = args.out or os.path.join("renders", f"{wedge.name}_wedge")
+    finished = record.open_folder(out, wedge, args.resume)
+    rows = {v.id: record.index_row(wedge, v, finished.get(v.id)) for v in wedge.variants}
+    _write_index(out, wedge, rows)
+    todo = [v for v in wedge.variants if v.id not in finished]
+    progress = WedgeProgress(len(wedge.variants), {v.id: v.frames for v in wedge.variants},
+                             args.quiet)
+    for vid in finished:
+        progress.skipped(vid)
+    workers = None if args.scheduler else (args.workers or os.cpu_count() or 1)
+    threads = args.threads or (max(1, (os.cpu_count() or 1) // workers) if workers else None)
+    timing = {"variants_run": len(todo), "skipped": len(finished)}
+    stopped = None
+    results = []
+    if todo:
+        stopped = _render_all(args, wedge, todo, out, rows, progress, results, timing,
+                              workers, threads)
+    progress.close()
+    t_sheet = time.perf_counter()
+    sheet = _sheet(out, wedge, rows)
+    timing["sheet_s"] = time.perf_counter() - t_sheet
+    timing["wall_s"] = time.perf_counter() - t_begin
+    timing.update(_overhead(results, timing))
+    _save_record(out, wedge, timing)
+    return _summary(wedge, out, rows, sheet, timing, stopped)
+
+
+def _render_all(args, wedge, todo, out, rows, progress, results, timing, workers, threads):
+    """Queue ``todo`` on the farm and record results as they come; returns the stop signal's
+    StopRequest if SIGINT/SIGTERM arrived (the rest is cancelled), else None."""
+    from ..signals import StopRequest
+
+    t0 = time.perf_counter()
+    with StopRequest() as stop:
+        farm = Farm(workers=workers, scheduler=args.scheduler)
+        try:
+            timing.update(start_s=time.perf_counter() - t0, workers=farm.worker_count,
+                          threads_per_worker=threads)
+            farm.on_frame = progress.frame
+            futures = {farm.submit(_task(args, wedge, v, out, threads)): v for v in todo}
+            pending = farm.as_completed(list(futures))
+            write_s = []
+            while not pending.is_empty():
+                for fut in pending.next_batch(block=False):
+                    res = fut.result() if fut.status == "finished" else failure_of(fut)
+                    t = time.perf_counter()
+                    _record(out, wedge, futures[fut], res, rows, progress)
+                    write_s.append(time.perf_counter() - t)
+                    results.append(res)
+                if stop.requested:
+                    farm.client.cancel(list(futures))
+                    break
+                progress.draw()
+                time.sleep(_POLL)
+            timing["write_s_mean"] = statistics.fmean(write_s) if write_s else 0.0
+        finally:
+            farm.close()
+        return stop if stop.requested else None
+
+
+def _record(out, wedge, variant, res, rows, progress):
+    thumb = res.pop("thumbnail", None)
+    if thumb:
+        record.save_thumb(out, variant.id, thumb)
+    rows[variant.id] = record.index_row(wedge, variant, res)
+    _write_index(out, wedge, rows)
+    progress.finished(variant.id, res["status"] == "ok", int(res.get("frames") or 0))
+
+
+def _write_index(out, wedge, rows):
+    try:
+        record.write_index(out, wedge, [rows[v.id] for v in wedge.variants])
+    except OSError as e:
+        raise OutputFailure(f"--out: cannot write {record.INDEX} in {out}: {e.strerror or e}") from None
+
+
+def _sheet(out, wedge, rows):
+    try:
+        return build_sheet(out, wedge, rows)
+    except OSError as e:
+        raise OutputFailure(f"--out: cannot write {record.SHEET} in {out}: {e.strerror or e}") from None
+
+
+def _save_record(out, wedge, timing):
+    try:
+        record.write_record(out, wedge, {k: round(v, 4) if isinstance(v, float) else v
+                                         for k, v in timing.items()})
+    except OSError as e:
+        raise OutputFailure(f"--out: cannot write {record.RECORD} in {out}: {e.strerror or e}") from None
+
+
+def _overhead(results, timing) -> dict:
+    """Where the workers' time went. ``busy`` is worker time inside variants (scene build, frames,
+    thumbnail; not Taichi's start); the rest of workers × wall is overhead: cluster start, Taichi
+    import and init, scheduling gaps between a worker's variants, idle tails, index and sheet
+    writes. Per-worker gaps use that worker's own clock."""
+    ran = [r for r in results if "t_start" in r]
+    if not ran or not timing.get("workers"):
+        return {}
+    busy = sum(r["t_end"] - r["t_start"] - r.get("init_s", 0.0) for r in ran)
+    by_worker = defaultdict(list)
+    for r in ran:
+        by_worker[r["worker"]].append((r["t_start"], r["t_end"]))
+    gaps = [b[0] - a[1] for spans in by_worker.values()
+            for a, b in zip(sorted(spans), sorted(spans)[1:])]
+    inits = [r["init_s"] for r in ran if r.get("init_s")]
+    return {"busy_s": busy,
+            "overhead_per_variant_s": (timing["workers"] * timing["wall_s"] - busy) / len(ran),
+            "gap_s_mean": statistics.fmean(gaps) if gaps else 0.0,
+            "taichi_init_s_mean": statistics.fmean(inits) if inits else 0.0}
+
+
+def _summary(wedge, out, rows, sheet, timing, stopped) -> int:
+    failed = [(vid, r) for vid, r in rows.items() if r["status"] not in ("ok", "pending")]
+    ok = sum(r["status"] == "ok" for r in rows.values())
+    ov = timing.get("overhead_per_variant_s")
+    where = (f"{timing['workers']} worker(s) x {timing['threads_per_worker'] or 'all'} thread(s)"
+             if timing.get("workers") else "nothing to render")
+    print(f"{wedge.name}: {len(wedge.variants)} variants ({ok} ok, {len(failed)} failed"
+          + (f", {timing['skipped']} already done" if timing["skipped"] else "")
+          + f") in {out}: {record.INDEX}, {os.path.basename(sheet)}; {timing['wall_s']:.1f} s wall on "
+          + where + (f"; overhead {ov:.2f} s per variant" if ov is not None else ""))
+    if stopped is not None:
+        raise Stopped(f"stopped by {stopped.name}: {ok} of {len(wedge.variants)} variants done "
+                      f"(index in {out}); continue with --resume", stopped.signum)
+    if failed:
+        labels = {v.id: v.label(wedge.keys) for v in wedge.variants}
+        lines = [f"variant {vid} ({labels[vid]}): exit {r['exit_code']}: {r['message']}"
+                 for vid, r in failed[:10]]
+        if len(failed) > 10:
+            lines.append(f"... and {len(failed) - 10} more failed variants (see {record.INDEX})")
+        e = UserError("\n".join(lines))
+        e.exit_code = int(failed[0][1]["exit_code"] or 1)
+        raise e
+    return 0
