@@ -14,6 +14,7 @@ EXPECTED = {
     "ode": ["engine RK4 step doubling (f32)", "scipy solve_ivp RK45 (f64)"],
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
     "features": ["all features", "none of them"],
+    "wedge": ["2 x particles run, one after another", "particles wedge, 2 workers x 1 thread"],
 }
 
 
@@ -29,6 +30,8 @@ def test_quick_bench_has_every_row_with_finite_positive_figures():
         assert math.isfinite(r.value) and r.value > 0, r
     table = bench.format_table(rows)
     assert all(n in table for n in names)
+    # the wedge renders the same bytes as `particles run` with the same seeds
+    assert all(r.extra["same"] for r in rows if r.section.startswith("wedge") and "wedge" in r.name)
     feats = {r.name: r.extra["kernels"] for r in rows if r.section.startswith("features")}
     # a scene without optional features compiles no more kernels than the full one
     assert len(feats["none of them"]) <= len(feats["all features"])

@@ -4,7 +4,8 @@ Sections (``--only`` takes their names): ``step`` (the particle step against Num
 bandwidth limit), ``frame`` (a full 1M-particle frame), ``ode`` (adaptive RK4 against scipy's
 RK45 at equal error), ``startup`` (cold and warm ``particles run``), ``features`` (the cost of each
 optional feature and proof that an unused one compiles nothing), ``cloth`` (when
-``engine.springs`` exists). ``quick`` uses small sizes so CI can run it in seconds.
+``engine.springs`` exists), ``wedge`` (``particles wedge`` on local Dask workers against the same
+variants run one after another). ``quick`` uses small sizes so CI can run it in seconds.
 """
 from __future__ import annotations
 
@@ -14,9 +15,9 @@ import time
 
 from .common import Row, format_table
 
-SECTIONS = ("step", "frame", "ode", "startup", "features", "cloth")
+SECTIONS = ("step", "frame", "ode", "startup", "features", "cloth", "wedge")
 _MODULES = {"step": "step", "frame": "frame", "ode": "ode_vs_scipy", "startup": "startup",
-            "features": "features", "cloth": "cloth"}
+            "features": "features", "cloth": "cloth", "wedge": "wedge"}
 
 
 def run(quick: bool = False, only=None, echo=None):
