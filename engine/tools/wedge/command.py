@@ -51,26 +51,39 @@ def _task(args, wedge, variant, out, threads) -> dict:
 
 
 def cmd_wedge(args) -> int:
+    from ..signals import StopRequest
+
     t_begin = time.perf_counter()
     wedge = spec.build(args.config, args.set, args.seeds, args.frames, args.size)
     _check_flags(args, wedge)
     out = args.out or os.path.join("renders", f"{wedge.name}_wedge")
-    finished = record.open_folder(out, wedge, args.resume)
-    rows = {v.id: record.index_row(wedge, v, finished.get(v.id)) for v in wedge.variants}
-    _write_index(out, wedge, rows)
+    finished = record.check_folder(out, wedge, args.resume)
     todo = [v for v in wedge.variants if v.id not in finished]
+    workers = None if args.scheduler else (args.workers or os.cpu_count() or 1)
+    threads = args.threads or (max(1, (os.cpu_count() or 1) // workers) if workers else None)
     progress = WedgeProgress(len(wedge.variants), {v.id: v.frames for v in wedge.variants},
                              args.quiet)
     for vid in finished:
         progress.skipped(vid)
-    workers = None if args.scheduler else (args.workers or os.cpu_count() or 1)
-    threads = args.threads or (max(1, (os.cpu_count() or 1) // workers) if workers else None)
     timing = {"variants_run": len(todo), "skipped": len(finished)}
-    stopped = None
     results = []
-    if todo:
-        stopped = _render_all(args, wedge, todo, out, rows, progress, results, timing,
-                              workers, threads)
+    with StopRequest() as stop:
+        t0 = time.perf_counter()
+        farm = Farm(workers=workers, scheduler=args.scheduler) if todo else None  # may refuse
+        try:
+            if farm is not None:
+                timing.update(start_s=time.perf_counter() - t0, workers=farm.worker_count,
+                              threads_per_worker=threads)
+            _create_folder(out, wedge)
+            rows = {v.id: record.index_row(wedge, v, finished.get(v.id)) for v in wedge.variants}
+            _write_index(out, wedge, rows)
+            if farm is not None:
+                tasks = [_task(args, wedge, v, out, threads) for v in todo]
+                _render_all(farm, tasks, wedge, out, rows, progress, results, timing, stop)
+        finally:
+            if farm is not None:
+                farm.close()
+        stopped = stop if stop.requested else None
     progress.close()
     t_sheet = time.perf_counter()
     sheet = _sheet(out, wedge, rows)
@@ -81,37 +94,34 @@ def cmd_wedge(args) -> int:
     return _summary(wedge, out, rows, sheet, timing, stopped)
 
 
-def _render_all(args, wedge, todo, out, rows, progress, results, timing, workers, threads):
-    """Queue ``todo`` on the farm and record results as they come; returns the stop signal's
-    StopRequest if SIGINT/SIGTERM arrived (the rest is cancelled), else None."""
-    from ..signals import StopRequest
+def _render_all(farm, tasks, wedge, out, rows, progress, results, timing, stop):
+    """Queue the variants on the farm and record each result as it arrives; on SIGINT/SIGTERM
+    (``stop``) cancel what is left."""
+    by_id = {v.id: v for v in wedge.variants}
+    farm.on_frame = progress.frame
+    futures = {farm.submit(task): by_id[task["id"]] for task in tasks}
+    pending = farm.as_completed(list(futures))
+    write_s = []
+    while not pending.is_empty():
+        for fut in pending.next_batch(block=False):
+            res = fut.result() if fut.status == "finished" else failure_of(fut)
+            t = time.perf_counter()
+            _record(out, wedge, futures[fut], res, rows, progress)
+            write_s.append(time.perf_counter() - t)
+            results.append(res)
+        if stop.requested:
+            farm.client.cancel(list(futures))
+            break
+        progress.draw()
+        time.sleep(_POLL)
+    timing["write_s_mean"] = statistics.fmean(write_s) if write_s else 0.0
 
-    t0 = time.perf_counter()
-    with StopRequest() as stop:
-        farm = Farm(workers=workers, scheduler=args.scheduler)
-        try:
-            timing.update(start_s=time.perf_counter() - t0, workers=farm.worker_count,
-                          threads_per_worker=threads)
-            farm.on_frame = progress.frame
-            futures = {farm.submit(_task(args, wedge, v, out, threads)): v for v in todo}
-            pending = farm.as_completed(list(futures))
-            write_s = []
-            while not pending.is_empty():
-                for fut in pending.next_batch(block=False):
-                    res = fut.result() if fut.status == "finished" else failure_of(fut)
-                    t = time.perf_counter()
-                    _record(out, wedge, futures[fut], res, rows, progress)
-                    write_s.append(time.perf_counter() - t)
-                    results.append(res)
-                if stop.requested:
-                    farm.client.cancel(list(futures))
-                    break
-                progress.draw()
-                time.sleep(_POLL)
-            timing["write_s_mean"] = statistics.fmean(write_s) if write_s else 0.0
-        finally:
-            farm.close()
-        return stop if stop.requested else None
+
+def _create_folder(out, wedge):
+    try:
+        record.create_folder(out, wedge)
+    except OSError as e:
+        raise OutputFailure(f"--out: cannot write to {out}: {e.strerror or e}") from None
 
 
 def _record(out, wedge, variant, res, rows, progress):
@@ -146,22 +156,25 @@ def _save_record(out, wedge, timing):
 
 
 def _overhead(results, timing) -> dict:
-    """Where the workers' time went. ``busy`` is worker time inside variants (scene build, frames,
-    thumbnail; not Taichi's start); the rest of workers × wall is overhead: cluster start, Taichi
-    import and init, scheduling gaps between a worker's variants, idle tails, index and sheet
-    writes. Per-worker gaps use that worker's own clock."""
+    """Where the workers' time went. ``busy``: worker time inside variants (scene build and kernel
+    compilation, frames, thumbnail; not Taichi's import and init). ``tail``: workers idle at the
+    end, waiting for the last variant elsewhere (uneven variants, not a cost of the farm). The rest
+    of workers × wall, per variant, is the overhead: cluster start, Taichi import and init in each
+    worker, scheduling gaps between a worker's variants, the contact sheet. Each worker's figures
+    use its own clock."""
     ran = [r for r in results if "t_start" in r]
     if not ran or not timing.get("workers"):
         return {}
     busy = sum(r["t_end"] - r["t_start"] - r.get("init_s", 0.0) for r in ran)
-    by_worker = defaultdict(list)
+    spans = defaultdict(list)
     for r in ran:
-        by_worker[r["worker"]].append((r["t_start"], r["t_end"]))
-    gaps = [b[0] - a[1] for spans in by_worker.values()
-            for a, b in zip(sorted(spans), sorted(spans)[1:])]
+        spans[r["worker"]].append((r["t_start"], r["t_end"]))
+    gaps = [b[0] - a[1] for s in spans.values() for a, b in zip(sorted(s), sorted(s)[1:])]
+    last = max(r["t_end"] for r in ran)
+    tail = sum(last - max(end for _, end in s) for s in spans.values())
     inits = [r["init_s"] for r in ran if r.get("init_s")]
-    return {"busy_s": busy,
-            "overhead_per_variant_s": (timing["workers"] * timing["wall_s"] - busy) / len(ran),
+    return {"busy_s": busy, "tail_idle_s": tail,
+            "overhead_per_variant_s": (timing["workers"] * timing["wall_s"] - busy - tail) / len(ran),
             "gap_s_mean": statistics.fmean(gaps) if gaps else 0.0,
             "taichi_init_s_mean": statistics.fmean(inits) if inits else 0.0}
 

@@ -43,35 +43,36 @@ def _differences(old: dict, new: dict):
     return [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
 
 
-def open_folder(out: str, wedge, resume: bool) -> dict:
-    """Prepare ``out`` for ``wedge``; returns {variant id: index row} of the variants a previous
-    run finished (only with ``resume``). Refuses (exit 2) a folder holding anything without
-    ``resume``, or a wedge made with other settings; exit 4 when it cannot be written."""
+def check_folder(out: str, wedge, resume: bool) -> dict:
+    """Check ``out`` can take ``wedge``, writing nothing; returns {variant id: index row} of the
+    variants a previous run finished (only with ``resume``). Refuses (exit 2) a folder holding
+    anything without ``resume``, or a wedge made with other settings; exit 4 for a file."""
     if os.path.exists(out) and not os.path.isdir(out):
         raise OutputFailure(f"--out: {out} exists and is not a directory")
     held = sorted(os.listdir(out)) if os.path.isdir(out) else []
-    finished = {}
-    if held and not resume:
+    if not held:
+        return {}
+    if not resume:
         raise UserError(f"--out: {out} already holds {len(held)} file(s) or folder(s); pass "
                         f"--resume to finish a wedge there, or choose another --out")
-    if held:
-        try:
-            with open(os.path.join(out, RECORD)) as fh:
-                old = json.load(fh)["wedge"]
-        except (OSError, ValueError, KeyError, TypeError):
-            raise UserError(f"--resume: {out} holds no readable {RECORD}; it is not a wedge folder"
-                            ) from None
-        diff = _differences(old, wedge.record())
-        if diff:
-            raise UserError(f"--resume: {out} was made with other settings ({', '.join(diff)}); "
-                            f"choose another --out") from None
-        finished = _finished(out, read_index(out))
     try:
-        os.makedirs(os.path.join(out, THUMBS), exist_ok=True)
-        write_record(out, wedge)
-    except OSError as e:
-        raise OutputFailure(f"--out: cannot write to {out}: {e.strerror or e}") from None
-    return finished
+        with open(os.path.join(out, RECORD)) as fh:
+            old = json.load(fh)["wedge"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise UserError(f"--resume: {out} holds no readable {RECORD}; it is not a wedge folder"
+                        ) from None
+    diff = _differences(old, wedge.record())
+    if diff:
+        raise UserError(f"--resume: {out} was made with other settings ({', '.join(diff)}); "
+                        f"choose another --out")
+    return _finished(out, read_index(out))
+
+
+def create_folder(out: str, wedge) -> None:
+    """Create ``out`` (and its thumbnail folder) and write the wedge's record; OSError if it
+    cannot be written."""
+    os.makedirs(os.path.join(out, THUMBS), exist_ok=True)
+    write_record(out, wedge)
 
 
 def _finished(out: str, rows) -> dict:

@@ -100,7 +100,7 @@ def build_sheet(out: str, wedge, rows) -> str:
             draw.text((x, ty + line_h * (k + 1)), _fit(draw, f"{name}={text}", font, cell_w),
                       font=font, fill=TEXT)
     buf = io.BytesIO()
-    sheet.save(buf, format="PNG", optimize=True)
+    sheet.save(buf, format="PNG", compress_level=6)  # optimize=True: 3x the time, 5% smaller
     path = os.path.join(out, SHEET)
     write_atomic(path, buf.getvalue())
     return path
