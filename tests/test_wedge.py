@@ -188,6 +188,7 @@ def test_a_killed_worker_s_variant_is_rerun_elsewhere_with_no_torn_frames(tmp_pa
     (["--seeds", "3", "--set", "seed=1,2"], "--seeds and --set seed=...: choose one"),
     (["--seeds", "2", "--frames", "0"], "--frames: 0 is not allowed"),
     (["--seeds", "2", "--workers", "0"], "--workers: 0 is not allowed"),
+    (["--seeds", "2", "--workers", "100000"], "--workers: 100000 is not allowed: must be 1 to"),
     (["--seeds", "2", "--sheet-frame", "6"], "--sheet-frame: 6 is not a frame of variant v000 (frames 0..5)"),
     (["--set", "a=" + ",".join("0" * 101), "--set", "b=" + ",".join("0" * 101)], "10,201 variants"),
 ])

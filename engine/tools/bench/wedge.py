@@ -4,7 +4,8 @@ The variants are seeds of configs/sparks.toml (``--seeds N``; the k-th one is ``
 --seed <config seed + k>``), so both sides render exactly the same frames — the bench checks the
 bytes. Every figure is the wall time of whole commands as subprocesses (interpreter start, Taichi
 import and init, kernel compilation, simulation, PNG writing), the two sides interleaved and the
-best of two kept (one pass with ``quick``). The wedge's overhead per variant is the worker time
+best of two kept (one pass with ``quick``); CPU seconds (of the processes and their workers)
+show the work each side does whatever the load of a shared machine. The wedge's overhead per variant is the worker time
 spent outside variants, less the idle tail while the last variant finishes elsewhere:
 ``(workers × wall − Σ variant time − tail) / variants`` — interpreter and cluster start, Taichi's
 import and init in each worker, scheduling gaps, the contact sheet.
@@ -27,16 +28,28 @@ CONFIG = os.path.join(CONFIGS, "sparks.toml")
 SECTION = "wedge: {n} variants x {frames} frames of configs/sparks.toml at {size}, subprocesses"
 
 
-def _particles(*argv) -> float:
+def _cpu_children() -> float:
+    """CPU seconds (user + system) of the finished child processes and their descendants (NaN
+    where the platform cannot say)."""
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not POSIX
+        return math.nan
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _particles(*argv):
+    """Run ``particles ARGV``; (wall seconds, CPU seconds of it and its worker processes)."""
     env = dict(os.environ, TI_SKIP_VERSION_CHECK="ON",
                PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    t0 = time.perf_counter()
+    c0, t0 = _cpu_children(), time.perf_counter()
     p = subprocess.run([sys.executable, "-m", "engine", *map(str, argv)], env=env, cwd=ROOT,
                        capture_output=True, text=True, timeout=3600)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, _cpu_children() - c0
     if p.returncode != 0:
         raise RuntimeError(f"particles {argv[0]} failed ({p.returncode}): {p.stderr.strip()[-500:]}")
-    return wall
+    return wall, cpu
 
 
 def _same_frames(a: str, b: str) -> bool:
@@ -53,20 +66,20 @@ def _same_frames(a: str, b: str) -> bool:
 def _wedge(tmp, tag, n, frames, size, workers, threads):
     out = os.path.join(tmp, f"wedge-{tag}")
     shutil.rmtree(out, ignore_errors=True)
-    wall = _particles("wedge", CONFIG, "--seeds", n, "--frames", frames, "--size", size,
-                      "--workers", workers, "--threads", threads, "--out", out, "--quiet")
+    wall, cpu = _particles("wedge", CONFIG, "--seeds", n, "--frames", frames, "--size", size,
+                           "--workers", workers, "--threads", threads, "--out", out, "--quiet")
     with open(os.path.join(out, "wedge.json")) as fh:
         t = json.load(fh)["timing"]
     t["overhead_s"] = (workers * wall - t["busy_s"] - t["tail_idle_s"]) / n
+    t["cpu_s"] = cpu
     return out, wall, t
 
 
-def _sequential(seq_dirs, seed0, frames, size) -> float:
-    t0 = time.perf_counter()
-    for k, d in enumerate(seq_dirs):
-        _particles("run", CONFIG, "--seed", seed0 + k, "--frames", frames, "--size", size,
-                   "--out", d, "--overwrite", "--quiet")
-    return time.perf_counter() - t0
+def _sequential(seq_dirs, seed0, frames, size):
+    """The runs one after another: (wall seconds, CPU seconds)."""
+    runs = [_particles("run", CONFIG, "--seed", seed0 + k, "--frames", frames, "--size", size,
+                       "--out", d, "--overwrite", "--quiet") for k, d in enumerate(seq_dirs)]
+    return sum(w for w, _ in runs), sum(c for _, c in runs)
 
 
 def run(quick: bool = False):
@@ -78,12 +91,13 @@ def run(quick: bool = False):
     seed0 = read_toml(CONFIG).get("seed", 0)
     section = SECTION.format(n=n, frames=frames, size=size)
     setups = [("2 workers x 1 thread", 2, 1)] + ([] if quick else [("2 workers x 2 threads", 2, 2)])
-    seq = math.inf
+    seq, seq_cpu = math.inf, 0.0
     best = {}
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
     with tempfile.TemporaryDirectory(prefix="particles-bench-wedge-") as tmp:
         seq_dirs = [os.path.join(tmp, "seq", f"v{k:03d}") for k in range(n)]
         for _ in range(repeats):
-            seq = min(seq, _sequential(seq_dirs, seed0, frames, size))
+            seq, seq_cpu = min((seq, seq_cpu), _sequential(seq_dirs, seed0, frames, size))
             for tag, workers, threads in setups:
                 out, wall, t = _wedge(tmp, f"{workers}w{threads}t", n, frames, size, workers, threads)
                 t["same"] = all(_same_frames(os.path.join(out, f"v{k:03d}"), d)
@@ -92,7 +106,7 @@ def run(quick: bool = False):
                     best[tag] = (wall, t)
     rows = [Row(section, f"{n} x particles run, one after another", seq, "s",
                 f"{seq / n:.2f} s per variant (process start, Taichi init, kernels, frames); "
-                f"best of {repeats}")]
+                f"{seq_cpu:.1f} CPU s; best of {repeats}; load average {load:.1f} before")]
     for tag, workers, _ in setups:
         wall, t = best[tag]
         target = "; target <= 0.6" if workers == 2 and t["threads_per_worker"] == 1 else ""
@@ -102,6 +116,7 @@ def run(quick: bool = False):
                         f"{t['start_s']:.2f} s, Taichi import+init {t['taichi_init_s_mean']:.2f} s per "
                         f"worker, gap {1000 * t['gap_s_mean']:.0f} ms, sheet {1000 * t['sheet_s']:.0f} "
                         f"ms; idle tail {t['tail_idle_s']:.1f} s; {t['busy_s'] / n:.2f} s inside each "
-                        f"variant; same bytes as run: {'yes' if t['same'] else 'NO'}",
+                        f"variant; {t['cpu_s']:.1f} CPU s; same bytes as run: "
+                        f"{'yes' if t['same'] else 'NO'}",
                         extra={"ratio": wall / seq, "overhead_s": t["overhead_s"], "same": t["same"]}))
     return rows

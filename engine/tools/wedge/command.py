@@ -21,11 +21,16 @@ from .sheet import build_sheet
 #: thumbnails (and so contact-sheet cells) are at most this wide
 THUMB_WIDTH = 320
 _POLL = 0.05  # seconds between looks at finished variants, stop requests and the progress bar
+#: local worker processes allowed per core (each holds a Taichi program: 0.2 GB and up)
+MAX_WORKERS_PER_CORE = 4
 
 
 def _check_flags(args, wedge):
-    if args.workers is not None and args.workers < 1:
-        raise UserError(f"--workers: {args.workers} is not allowed: must be >= 1")
+    cores = os.cpu_count() or 1
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS_PER_CORE * cores:
+        raise UserError(f"--workers: {args.workers} is not allowed: must be 1 to "
+                        f"{MAX_WORKERS_PER_CORE * cores} ({MAX_WORKERS_PER_CORE} per core here); "
+                        f"for more, start a Dask cluster and pass --scheduler")
     if args.workers is not None and args.scheduler:
         raise UserError("--workers and --scheduler: choose one (the cluster at --scheduler has "
                         "its own workers)")
@@ -59,7 +64,8 @@ def cmd_wedge(args) -> int:
     out = args.out or os.path.join("renders", f"{wedge.name}_wedge")
     finished = record.check_folder(out, wedge, args.resume)
     todo = [v for v in wedge.variants if v.id not in finished]
-    workers = None if args.scheduler else (args.workers or os.cpu_count() or 1)
+    # no more local workers than variants to render: an idle worker costs a start and memory
+    workers = None if args.scheduler else max(1, min(args.workers or os.cpu_count() or 1, len(todo)))
     threads = args.threads or (max(1, (os.cpu_count() or 1) // workers) if workers else None)
     progress = WedgeProgress(len(wedge.variants), {v.id: v.frames for v in wedge.variants},
                              args.quiet)
