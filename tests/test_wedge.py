@@ -56,8 +56,8 @@ def test_wedge_renders_variants_index_sheet_and_records_a_diverging_one(tmp_path
     # explicit drag k = 1e6 1/s at h = 1/30 s multiplies speeds by ~3e4 a step: non-finite by frame 9
     cfg = write_cfg(tmp_path, frames=12)
     out = tmp_path / "w"
-    r = particles("wedge", cfg, "--set", "emitters.0.rate=200,400", "--set", "emitters.0.drag=0.5,1e6",
-                  "--workers", "2", "--out", out)
+    r = particles("wedge", cfg, "--set", "emitters.0.rate=200,400",
+                  "--set", "emitters.0.drag=0.5,1e6", "--workers", "2", "--out", out)
     assert r.returncode == 3, r.stderr
     errors = [line for line in r.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 2 and all("diverged" in e and "emitters.0.drag=1e6" in e for e in errors), r.stderr
@@ -179,19 +179,27 @@ def test_a_killed_worker_s_variant_is_rerun_elsewhere_with_no_torn_frames(tmp_pa
     assert same_bytes(out / vid, tmp_path / "ref") == 24
 
 
-@pytest.mark.parametrize("flags, expected", [
-    (["--set", "emitters.0.rate=100,-5"], "--set emitters.0.rate=-5: emitters[0].rate: -5 is not allowed"),
-    (["--set", "emitters.0.rate=100,200", "--set", "solver.hh=0.01"], "--set solver.hh=0.01: solver.hh: unknown key; did you mean 'h'? (variants v000, v001)"),
-    (["--set", "emitters.2.rate=1"], "--set emitters.2.rate: emitters has 1 item(s); index 2 is out of range"),
+BAD = [  # flags, the one error line (or the start of it)
+    (["--set", "emitters.0.rate=100,-5"],
+     "--set emitters.0.rate=-5: emitters[0].rate: -5 is not allowed"),
+    (["--set", "emitters.0.rate=100,200", "--set", "solver.hh=0.01"],
+     "--set solver.hh=0.01: solver.hh: unknown key; did you mean 'h'? (variants v000, v001)"),
+    (["--set", "emitters.2.rate=1"],
+     "--set emitters.2.rate: emitters has 1 item(s); index 2 is out of range"),
     (["--set", "rate"], "--set: 'rate' is not KEY=V1,V2,..."),
-    (["--set", "solver.integrator=rk4,bogus"], "--set solver.integrator=bogus: solver.integrator: 'bogus' is not allowed"),
+    (["--set", "solver.integrator=rk4,bogus"],
+     "--set solver.integrator=bogus: solver.integrator: 'bogus' is not allowed"),
     (["--seeds", "3", "--set", "seed=1,2"], "--seeds and --set seed=...: choose one"),
     (["--seeds", "2", "--frames", "0"], "--frames: 0 is not allowed"),
     (["--seeds", "2", "--workers", "0"], "--workers: 0 is not allowed"),
     (["--seeds", "2", "--workers", "100000"], "--workers: 100000 is not allowed: must be 1 to"),
-    (["--seeds", "2", "--sheet-frame", "6"], "--sheet-frame: 6 is not a frame of variant v000 (frames 0..5)"),
+    (["--seeds", "2", "--sheet-frame", "6"],
+     "--sheet-frame: 6 is not a frame of variant v000 (frames 0..5)"),
     (["--set", "a=" + ",".join("0" * 101), "--set", "b=" + ",".join("0" * 101)], "10,201 variants"),
-])
+]
+
+
+@pytest.mark.parametrize("flags, expected", BAD)
 def test_bad_input_is_one_line_naming_key_and_variant_and_nothing_is_written(tmp_path, flags,
                                                                              expected):
     cfg = write_cfg(tmp_path)

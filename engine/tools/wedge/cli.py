@@ -36,7 +36,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     w.add_argument("--threads", type=int, default=argparse.SUPPRESS,
                    help="Taichi CPU threads per worker (default: cores / workers)")
     w.add_argument("--arch", default=argparse.SUPPRESS,
-                   choices=["cpu", "cuda", "vulkan", "metal", "gpu"], help="Taichi backend of the workers")
+                   choices=["cpu", "cuda", "vulkan", "metal", "gpu"],
+                   help="Taichi backend of the workers")
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     w.set_defaults(func=_run, no_taichi=True)  # the client needs no Taichi: the workers have it
     return w

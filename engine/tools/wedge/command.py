@@ -162,12 +162,15 @@ def _save_record(out, wedge, timing):
 
 
 def _overhead(results, timing) -> dict:
-    """Where the workers' time went. ``busy``: worker time inside variants (scene build and kernel
-    compilation, frames, thumbnail; not Taichi's import and init). ``tail``: workers idle at the
-    end, waiting for the last variant elsewhere (uneven variants, not a cost of the farm). The rest
-    of workers × wall, per variant, is the overhead: cluster start, Taichi import and init in each
-    worker, scheduling gaps between a worker's variants, the contact sheet. Each worker's figures
-    use its own clock."""
+    """Where the workers' time went. ``busy``: worker time inside variants (scene build, kernels,
+    frames, thumbnail), not counting Taichi's program start and reset around each (``taichi_s``,
+    with the imports on a worker's first variant). ``tail``: workers idle at the end, waiting for
+    the last variant elsewhere (uneven variants, not a cost of the farm). The rest of workers ×
+    wall, per variant, is the overhead: cluster start, Taichi's imports, start and reset,
+    scheduling gaps between a worker's variants, the contact sheet. Each worker's figures use its
+    own clock. ``cpu_s``: CPU seconds of the workers (to their last variant) and of this process
+    (with a local cluster, its scheduler), whatever else the machine was running. ``compile_s``:
+    Taichi's compile time (kernels not found in the offline cache)."""
     ran = [r for r in results if "t_start" in r]
     if not ran or not timing.get("workers"):
         return {}
@@ -178,11 +181,15 @@ def _overhead(results, timing) -> dict:
     gaps = [b[0] - a[1] for s in spans.values() for a, b in zip(sorted(s), sorted(s)[1:])]
     last = max(r["t_end"] for r in ran)
     tail = sum(last - max(end for _, end in s) for s in spans.values())
-    inits = [r["init_s"] for r in ran if r.get("init_s")]
+    cpu = {}  # worker -> its process CPU seconds at its last variant
+    for r in ran:
+        cpu[r["worker"]] = max(cpu.get(r["worker"], 0.0), r.get("process_cpu_s", 0.0))
     return {"busy_s": busy, "tail_idle_s": tail,
             "overhead_per_variant_s": (timing["workers"] * timing["wall_s"] - busy - tail) / len(ran),
             "gap_s_mean": statistics.fmean(gaps) if gaps else 0.0,
-            "taichi_init_s_mean": statistics.fmean(inits) if inits else 0.0}
+            "taichi_s_mean": statistics.fmean(r.get("init_s", 0.0) for r in ran),
+            "compile_s": sum(r.get("compile_s", 0.0) for r in ran),
+            "cpu_s": sum(cpu.values()) + time.process_time()}  # workers + this process
 
 
 def _summary(wedge, out, rows, sheet, timing, stopped) -> int:
