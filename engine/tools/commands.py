@@ -27,19 +27,15 @@ def _overrides(args) -> dict:
     return o
 
 
-def scene_config(path, args=None, edit=None):
+def scene_config(path, args=None):
     """The validated config ``particles run`` and ``validate`` both use: the TOML file, its name
-    from the file name unless it sets one, and the command line's overrides. ``edit(data)``, if
-    given, changes the raw table before validation (``particles wedge``'s ``--set``). Raises
-    ConfigError."""
+    from the file name unless it sets one, and the command line's overrides. Raises ConfigError."""
     data = read_toml(path)
     if data.get("name", "") == "":
         data["name"] = os.path.splitext(os.path.basename(path))[0]
     if getattr(args, "frames", None) is not None:
         data.pop("duration", None)
         data["frames"] = args.frames
-    if edit is not None:
-        edit(data)
     return load_config(data, _overrides(args) if args is not None else None)
 
 
@@ -116,15 +112,12 @@ def _open_output(cfg, args, out_dir) -> int:
     return first
 
 
-def cmd_run(args, cfg=None, progress=None, report=None) -> int:
-    """``particles run``. ``particles wedge`` calls it per variant with the variant's validated
-    ``cfg``, its own ``progress`` (``update(frame, alive)``, ``done()``) and a ``report`` dict
-    that receives the run's figures, filled also when the run fails."""
+def cmd_run(args) -> int:
     from ..render.output import FrameWriter, OutputError
     from ..scene import DivergenceError, Scene
     from .signals import StopRequest
 
-    cfg = cfg if cfg is not None else load_scene_config(args.config, args)
+    cfg = load_scene_config(args.config, args)
     out_dir = output_dir(cfg, args)
     first = _open_output(cfg, args, out_dir)
     t_start = time.perf_counter()
@@ -132,7 +125,7 @@ def cmd_run(args, cfg=None, progress=None, report=None) -> int:
     t_built = time.perf_counter()
     total = cfg.frame_count
     writer = FrameWriter(out_dir, args.format, cfg.fps, cfg.name)
-    progress = progress or Progress(total, args.quiet)
+    progress = Progress(total, args.quiet)
     failure = out_failure = None
     with StopRequest() as stop:
         try:
@@ -157,9 +150,6 @@ def cmd_run(args, cfg=None, progress=None, report=None) -> int:
     st = scene.stats
     done = first + len(writer.written) if args.format == "png" else 0
     kept = f"frames 0..{done - 1} kept in {out_dir}" if done else f"no frames kept in {out_dir}"
-    if report is not None:
-        report.update(frames=st.frames, whole_frames=done, resumed_at=first, wall=wall,
-                      peak_alive=st.peak_alive, dropped=scene.dropped())
     if out_failure is not None:
         raise OutputFailure(f"{out_failure} ({kept})")
     if failure is not None:

@@ -46,13 +46,12 @@ def _check_flags(args, wedge):
                             f"(frames 0..{short.frames - 1})")
 
 
-def _task(args, wedge, variant, out, threads) -> dict:
-    """What a worker needs for one variant: plain data (msgpack/pickle friendly)."""
-    return {"id": variant.id, "sets": [list(p) for p in variant.sets], "texts": list(variant.texts),
-            "seed": variant.seed, "config": wedge.config, "config_sha256": wedge.config_sha256,
-            "frames": wedge.frames, "size": wedge.size, "out": record.variant_dir(out, variant.id),
-            "arch": args.arch, "threads": threads, "sheet_frame": args.sheet_frame,
-            "thumb_width": THUMB_WIDTH}
+def _task(args, variant, out, threads) -> dict:
+    """What a worker needs for one variant: plain data (its config travels as TOML text, so a
+    worker needs no access to the submitter's files, only to ``out``)."""
+    return {"id": variant.id, "config_text": variant.config_text,
+            "out": record.variant_dir(out, variant.id), "arch": args.arch, "threads": threads,
+            "sheet_frame": args.sheet_frame, "thumb_width": THUMB_WIDTH}
 
 
 def cmd_wedge(args) -> int:
@@ -84,7 +83,7 @@ def cmd_wedge(args) -> int:
             rows = {v.id: record.index_row(wedge, v, finished.get(v.id)) for v in wedge.variants}
             _write_index(out, wedge, rows)
             if farm is not None:
-                tasks = [_task(args, wedge, v, out, threads) for v in todo]
+                tasks = [_task(args, v, out, threads) for v in todo]
                 _render_all(farm, tasks, wedge, out, rows, progress, results, timing, stop)
         finally:
             if farm is not None:

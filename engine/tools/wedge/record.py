@@ -1,5 +1,6 @@
 """The wedge folder: what was asked (``wedge.json``), what came of it (``index.csv``), the chosen
-frame of each variant (``.thumbs/``) and one folder of frames per variant.
+frame of each variant (``.thumbs/``), and per variant its whole config (``v003.toml``) and its
+folder of frames (``v003/``).
 
 ``wedge.json`` and ``index.csv`` are rewritten whole (temporary name, then rename) after every
 variant, so an interrupted wedge leaves a readable index; ``--resume`` skips the variants it marks
@@ -68,11 +69,18 @@ def check_folder(out: str, wedge, resume: bool) -> dict:
     return _finished(out, read_index(out))
 
 
+def config_path(out: str, variant_id: str) -> str:
+    return os.path.join(out, f"{variant_id}.toml")
+
+
 def create_folder(out: str, wedge) -> None:
-    """Create ``out`` (and its thumbnail folder) and write the wedge's record; OSError if it
-    cannot be written."""
+    """Create ``out`` (and its thumbnail folder), write the wedge's record and each variant's
+    whole config (``v003.toml``: ``particles run v003.toml --out v003`` renders that variant);
+    OSError if it cannot be written."""
     os.makedirs(os.path.join(out, THUMBS), exist_ok=True)
     write_record(out, wedge)
+    for v in wedge.variants:
+        write_atomic(config_path(out, v.id), v.config_text.encode("utf-8"))
 
 
 def _finished(out: str, rows) -> dict:

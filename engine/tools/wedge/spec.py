@@ -1,5 +1,6 @@
 """What a wedge renders: the product of the ``--set`` lists (× ``--seeds``), each variant checked
-with the same validation ``particles run`` uses before anything renders.
+with the same validation ``particles run`` uses before anything renders. Each variant's whole config
+is kept as TOML text: that file is what a worker hands to ``particles run``.
 
 A key is a config path with list items by index (``emitters.0.rate``, ``forces.turbulence.strength``,
 ``solver.h``); a value is read as a TOML value (``2.5``, ``3``, ``true``, ``[0.0, 1.0, 0.0]``,
@@ -8,7 +9,7 @@ quotes, so a vector is one value. Pure Python: no Taichi, nothing written.
 """
 from __future__ import annotations
 
-import argparse
+import copy
 import hashlib
 import itertools
 import math
@@ -33,14 +34,16 @@ _KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*|[0-9]+")
 @dataclass(frozen=True)
 class Variant:
     """One point of the wedge: ``id`` (``v000``...), ``sets`` the (key, value) pairs it sets,
-    ``texts`` the values as typed (for the index and labels), ``seed`` from ``--seeds`` or None,
-    ``frames`` how many frames it renders (known once validated)."""
+    ``texts`` the values as typed (for the index and labels), ``seed`` from ``--seeds`` or None;
+    once validated, ``frames`` (how many it renders) and ``config_text`` (its whole config as
+    TOML: what ``particles run`` renders for it)."""
 
     id: str
     sets: Tuple[Tuple[str, object], ...]
     texts: Tuple[str, ...]
     seed: Optional[int] = None
     frames: int = 0
+    config_text: str = ""
 
     def label(self, keys) -> str:
         """``emitters.0.rate=200 seed=8`` (the values as typed)."""
@@ -151,30 +154,31 @@ def set_path(data: dict, key: str, value) -> None:
             node = node[k]
 
 
-def apply_sets(sets):
-    """The ``edit`` for ``commands.scene_config``: set each (key, value) in the raw config."""
-
-    def edit(data: dict) -> None:
-        for key, value in sets:
-            try:
-                set_path(data, key, value)
-            except ValueError as e:
-                raise ValueError(f"--set {key}: {e}") from None
-
-    return edit
+def parse_size(text: str):
+    """``640x360`` → (640, 360); UserError naming --size otherwise (the range is the config's)."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise UserError(f"--size: {text!r} is not WxH (e.g. 640x360)") from None
+    return w, h
 
 
-def run_args(frames=None, size=None, seed=None) -> argparse.Namespace:
-    """The ``particles run`` arguments a variant shares with the command line's run."""
-    return argparse.Namespace(frames=frames, size=size, seed=seed, integrator=None)
-
-
-def variant_config(config_path: str, frames, size, variant: Variant):
-    """The validated config of one variant, by the same path ``particles run`` takes; raises
-    ConfigError (one line per problem) or ValueError (a --set path that does not fit)."""
-    from ..commands import scene_config
-
-    return scene_config(config_path, run_args(frames, size, variant.seed), edit=apply_sets(variant.sets))
+def variant_data(base: dict, frames, size, variant: Variant) -> dict:
+    """One variant's whole config as a table: the file's (``base``, named), then ``--frames``,
+    ``--size``, the seed and the ``--set`` values, as ``particles run`` would apply its own flags.
+    Raises ValueError naming the ``--set`` key whose path does not fit."""
+    data = copy.deepcopy(base)
+    if frames is not None:
+        data.pop("duration", None)
+        data["frames"] = frames
+    pairs = [] if size is None else list(zip(("render.width", "render.height"), parse_size(size)))
+    pairs += [] if variant.seed is None else [("seed", variant.seed)]
+    for key, value in pairs + list(variant.sets):
+        try:
+            set_path(data, key, value)
+        except ValueError as e:
+            raise ValueError(f"--set {key}: {e}") from None
+    return data
 
 
 def file_sha256(path: str) -> str:
@@ -184,18 +188,23 @@ def file_sha256(path: str) -> str:
 
 def build(config: str, sets: List[str], seeds: Optional[int], frames, size) -> Wedge:
     """Parse the ``--set`` lists, expand the product (seeds innermost) and validate every
-    variant. Raises UserError with one line per distinct problem, naming the key, value and the
-    variants it occurs in; nothing is written."""
-    from ...config import ConfigError, read_toml
+    variant's whole config. Raises UserError with one line per distinct problem, naming the key,
+    value and the variants it occurs in; nothing is written."""
+    from ...config import ConfigError, load_config, read_toml
+    from . import tomlout
 
     if frames is not None and frames < 1:
         raise UserError(f"--frames: {frames} is not allowed: must be >= 1")
     if seeds is not None and seeds < 1:
         raise UserError(f"--seeds: {seeds} is not allowed: must be >= 1")
+    if size is not None:
+        parse_size(size)
     try:
-        base_seed = read_toml(config).get("seed", 0)
+        base = read_toml(config)
     except ConfigError as e:
         raise UserError("\n".join(f"{config}: {p}" for p in e.problems)) from None
+    if base.get("name", "") == "":  # as particles run names a config
+        base["name"] = os.path.splitext(os.path.basename(config))[0]
     parsed = [parse_set(s) for s in sets]
     keys = [k for k, _ in parsed]
     dup = sorted({k for k in keys if keys.count(k) > 1})
@@ -211,6 +220,7 @@ def build(config: str, sets: List[str], seeds: Optional[int], frames, size) -> W
                         f"{' x --seeds' if seeds else ''}) is more than {MAX_VARIANTS:,}")
     seed_list = None
     if seeds is not None:
+        base_seed = base.get("seed", 0)
         if not isinstance(base_seed, int) or isinstance(base_seed, bool):
             base_seed = 0  # the config's own problem; validation below names it
         seed_list = [base_seed + k for k in range(seeds)]
@@ -225,8 +235,9 @@ def build(config: str, sets: List[str], seeds: Optional[int], frames, size) -> W
         v = Variant(f"v{n:0{width}d}", tuple((k, parse_value(t)) for k, t in pairs),
                     tuple(t for _, t in pairs), seed)
         try:
-            cfg = variant_config(config, frames, size, v)
-            v = replace(v, frames=cfg.frame_count)
+            data = variant_data(base, frames, size, v)
+            cfg = load_config(data)
+            v = replace(v, frames=cfg.frame_count, config_text=tomlout.dumps(data))
             wedge.name = wedge.name or cfg.name
         except ConfigError as e:
             for p in e.problems:

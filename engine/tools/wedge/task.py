@@ -1,8 +1,9 @@
-"""One variant on a worker: ``particles run``'s own path (``commands.cmd_run``) into the variant's
-folder, with its figures and a thumbnail of the chosen frame sent back.
+"""One variant on a worker: ``particles run`` itself (``cli.main``, in this process) on the
+variant's config file into the variant's folder, with its figures and a thumbnail of the chosen
+frame sent back.
 
 Runs inside a Dask worker process, which imports Taichi and the engine once. Each variant gets a
-fresh Taichi program (``runtime.init`` before, ``runtime.reset`` after: ~0.25 s), because the
+fresh Taichi program (``particles run`` initialises it, ``runtime.reset`` ends it: ~0.25 s): the
 offline kernel cache only pays off that way: a kernel's cache key includes the ids of the field
 trees it touches, which keep growing while a program lives, so the second scene of a program
 misses the entries the first scene of any ``particles run`` left and compiles everything again
@@ -21,6 +22,8 @@ import contextlib
 import io
 import os
 import platform
+import re
+import tempfile
 import threading
 import time
 
@@ -30,21 +33,41 @@ _one_at_a_time = threading.Lock()  # one Taichi program per process: variants ne
 _EVENT_EVERY = 0.2  # seconds between frame events per variant
 
 
-class _FrameEvents:
-    """``cmd_run``'s progress: frame counts to the client as Dask events, a few per second."""
+class _FrameWatch:
+    """Counts the whole frames in the variant's folder a few times a second (a frame appears
+    under its name only when whole) and sends the count to the client as a Dask event."""
 
-    def __init__(self, variant_id: str, total: int, emit):
-        self.id, self.total, self.emit = variant_id, total, emit
-        self._last = 0.0
+    def __init__(self, variant_id: str, folder: str, emit):
+        self.id, self.folder, self.emit = variant_id, folder, emit
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="wedge-frames", daemon=True)
+        self._sent = -1
 
-    def update(self, frame: int, alive: int) -> None:
-        now = time.monotonic()
-        if now - self._last >= _EVENT_EVERY or frame >= self.total:
-            self._last = now
-            self.emit({"variant": self.id, "frame": frame})
+    def count(self) -> int:
+        try:
+            return sum(1 for f in os.listdir(self.folder) if f.startswith("frame_"))
+        except OSError:
+            return 0
 
-    def done(self) -> None:
-        pass
+    def _send(self):
+        n = self.count()
+        if n != self._sent:
+            self._sent = n
+            self.emit({"variant": self.id, "frame": n})
+
+    def _run(self):
+        while not self._stop.wait(_EVENT_EVERY):
+            self._send()
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self._send()
+        return False
 
 
 def _dask_events(run: str):
@@ -59,10 +82,12 @@ def _dask_events(run: str):
 
 
 def _compile_seconds() -> float:
-    """Taichi's running total of compile time (kernels loaded from the offline cache add ~0)."""
+    """Taichi's running total of compile time (kernels loaded from the offline cache add ~0);
+    0 when no program is live (the run stopped before starting one)."""
     from taichi.lang import impl
 
-    return impl.get_runtime().prog.get_total_compilation_time()
+    prog = impl.get_runtime().prog
+    return prog.get_total_compilation_time() if prog is not None else 0.0
 
 
 def thumbnail_png(path: str, width: int) -> bytes:
@@ -79,7 +104,8 @@ def thumbnail_png(path: str, width: int) -> bytes:
 
 
 def render_variant(task: dict) -> dict:
-    """Render one variant; ``task`` is plain data (see ``command._task``). Returns the result:
+    """Render one variant; ``task`` is plain data (see ``command._task``: the variant's id and
+    config text, its folder, arch, threads, the chosen frame). Returns the result:
     ``variant``, ``status`` (``ok`` / ``failed``), ``exit_code``, ``message``, ``wall_s``,
     ``frames``, ``peak_particles``, ``dropped``, ``resumed_at``, ``worker``, ``thumbnail`` (PNG
     bytes or None), and the worker-side figures for the overhead: clock (``t_start``, ``t_end``),
@@ -102,57 +128,58 @@ def render_variant(task: dict) -> dict:
 
 
 def _render(task: dict, out: dict) -> None:
-    t0 = time.perf_counter()  # the first variant of a process also imports Taichi and the engine
+    t0 = time.perf_counter()  # the first variant of a process imports Taichi and the engine
     from ... import runtime
+    from ...render.resume import whole_frames
+    from .. import cli
 
-    runtime.init(task["arch"], threads=task["threads"])  # a fresh program for each variant
     out["init_s"] = time.perf_counter() - t0
+    fd, path = tempfile.mkstemp(prefix=f"wedge-{task['id']}-", suffix=".toml")
     try:
-        _render_in_program(task, out)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(task["config_text"])
+        argv = ["--arch", task["arch"]] + (["--threads", str(task["threads"])] if task["threads"]
+                                           else [])
+        argv += ["run", path, "--out", task["out"], "--resume", "--quiet"]
+        stdout, stderr = io.StringIO(), io.StringIO()
+        try:
+            with _FrameWatch(task["id"], task["out"], _dask_events(task.get("run"))), \
+                    contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+                code = cli.main(argv)  # particles run, as the command line runs it
+            out["compile_s"] = _compile_seconds()  # this variant's program: its compile time
+        finally:
+            t1 = time.perf_counter()
+            runtime.reset()  # writes the kernels compiled here to the offline cache, frees fields
+            out["init_s"] += time.perf_counter() - t1
     finally:
-        t0 = time.perf_counter()
-        runtime.reset()  # writes the kernels compiled here to the offline cache, frees the fields
-        out["init_s"] += time.perf_counter() - t0
-
-
-def _render_in_program(task: dict, out: dict) -> None:
-    from ...config import ConfigError
-    from ..commands import cmd_run
-    from ..errors import UserError
-    from .spec import Variant, file_sha256, variant_config
-
-    if file_sha256(task["config"]) != task["config_sha256"]:
-        out.update(exit_code=2, message=f"config: {task['config']} changed since the wedge started "
-                                        f"(or is another file on this worker)")
-        return
-    variant = Variant(task["id"], tuple(map(tuple, task["sets"])), tuple(task["texts"]), task["seed"])
-    try:
-        cfg = variant_config(task["config"], task["frames"], task["size"], variant)
-    except (ConfigError, ValueError, UserError) as e:  # the client checked it: the file differs here
-        out.update(exit_code=2, message=" ".join(str(e).split()))
-        return
-    report = {}
-    compiled = _compile_seconds()
-    try:
-        events = _FrameEvents(task["id"], cfg.frame_count, _dask_events(task.get("run")))
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            cmd_run(_run_args(task), cfg=cfg, progress=events, report=report)
-        out.update(status="ok", exit_code=0)
-    except UserError as e:  # diverged (3), output failure (4), refused folder (2)
-        out.update(exit_code=e.exit_code, message=" ".join(str(e).split()))
-    finally:
-        out["compile_s"] = _compile_seconds() - compiled
-    out.update(wall_s=round(report.get("wall", 0.0), 3), frames=report.get("whole_frames", 0),
-               peak_particles=report.get("peak_alive", ""), dropped=report.get("dropped", ""),
-               resumed_at=report.get("resumed_at", 0))
+        os.remove(path)
+    out.update(_summary_figures(stdout.getvalue()), exit_code=code,
+               status="ok" if code == 0 else "failed", frames=whole_frames(task["out"]))
+    if code != 0:
+        errors = [line.removeprefix("error: ") for line in stderr.getvalue().splitlines()
+                  if line.startswith("error: ")]
+        out["message"] = " ".join(" ".join(errors).split())[:500]
     out["thumbnail"] = _chosen_thumbnail(task, out["frames"])
 
 
-def _run_args(task):
-    import argparse
+_PEAK = re.compile(r"peak live particles ([\d,]+) of [\d,]+; dropped ([\d,]+)")
+_WALL = re.compile(r"; ([\d.]+) s wall")
+_RESUMED = re.compile(r"\(resumed at frame (\d+)\)")
 
-    return argparse.Namespace(config=task["config"], out=task["out"], format="png", resume=True,
-                              overwrite=False, quiet=True)
+
+def _summary_figures(text: str) -> dict:
+    """Peak particles, dropped, wall seconds and the resume frame from ``particles run``'s
+    summary line (blank where the run printed none: a failure, a scene without particles)."""
+    got = {}
+    m = _PEAK.search(text)
+    if m:
+        got["peak_particles"], got["dropped"] = (int(g.replace(",", "")) for g in m.groups())
+    m = _WALL.search(text)
+    if m:
+        got["wall_s"] = float(m.group(1))
+    m = _RESUMED.search(text)
+    got["resumed_at"] = int(m.group(1)) if m else 0
+    return got
 
 
 def _chosen_thumbnail(task, whole: int):
