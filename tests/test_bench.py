@@ -18,11 +18,12 @@ EXPECTED = {
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
     "features": ["all features", "none of them"],
     "output": ["sim + render (no output)", "particles run, 1 encoder"],
+    "wedge": ["2 x particles run, one after another", "particles wedge, 2 workers x 1 thread"],
 }
-# start-up runs `particles run` in subprocesses (a cold compile each), output builds three scenes
-# and effects builds a scene per config: together most of the quick bench's time, so they run
-# with the slow tests
-SLOW = ("startup", "output", "effects")
+# start-up runs `particles run` in subprocesses (a cold compile each), output builds three scenes,
+# effects builds a scene per config and wedge starts Dask workers: together most of the quick
+# bench's time, so they run with the slow tests
+SLOW = ("startup", "output", "effects", "wedge")
 
 
 def check_rows(rows, sections):
@@ -34,6 +35,8 @@ def check_rows(rows, sections):
         assert math.isfinite(r.value) and r.value > 0, r
     table = bench.format_table(rows)
     assert all(n in table for n in names)
+    # the wedge renders the same bytes as `particles run` with the same seeds
+    assert all(r.extra["same"] for r in rows if r.section.startswith("wedge") and "wedge" in r.name)
     return names
 
 
@@ -49,9 +52,9 @@ def test_quick_bench_has_every_row_with_finite_positive_figures():
 
 
 @pytest.mark.slow
-def test_quick_bench_startup_output_and_effects_sections():
+def test_quick_bench_slow_sections():
     rows = bench.run(quick=True, only=list(SLOW))
     check_rows(rows, SLOW)
-    ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra]
+    ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra and r.section.startswith("output")]
     assert len(ratios) == 2 and all(0 < q < 10 for q in ratios)
     assert any(r.section.startswith("effects") and r.name == "worst effect" for r in rows)
