@@ -51,9 +51,13 @@ class Scene:
     """Everything one config needs, built once. ``advance_frame()`` steps to the next frame time;
     ``render()`` draws the current state."""
 
-    def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, previous=None):
-        """``contacts``: record up to this many particle–collider contacts per advance (0: the
-        contact code is not compiled). ``previous``: the scene this one replaces (a rebuild
+    def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, previous=None,
+                 interpolate: bool = False):
+        """``contacts``: keep up to this many particle–collider contact records between drains
+        (0: the contact code is not compiled), and as many node contacts for each body whose
+        config asks for them. ``interpolate``: keep the particles' positions before each game
+        step (:meth:`save_positions`) so ``render(alpha=)`` can draw between the last two steps.
+        ``previous``: the scene this one replaces (a rebuild
         between frames): its time, statistics, inputs and live particles carry over by name, and
         its soft bodies whose config did not change are kept without recompiling them."""
         runtime.ensure_init()
@@ -69,7 +73,7 @@ class Scene:
         else:
             self.control = previous.control.rebuilt(cfg, specs)
             self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
-        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts)
+        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate)
                           if cfg.emitters else None)
         if previous is not None and previous.particles is not None and self.particles is not None:
             self.particles.carry_from(previous.particles)
@@ -85,7 +89,7 @@ class Scene:
                     old.use_control(self.control)
                     self.bodies.append(old)
                 else:
-                    self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k))
+                    self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k, contacts))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
@@ -106,6 +110,46 @@ class Scene:
             body.step(self.t, dt)
         self.t += dt
 
+    def reset(self) -> None:
+        """Back to the state the build left (t = 0, the config's inputs, empty pools, bodies at
+        rest), keeping every field, compiled kernel and render target: a level restart costs
+        launches, not compiles. The same config then gives the same bytes as a fresh build."""
+        self.t, self.frame = 0.0, 0
+        self.stats.__dict__.update(Stats().__dict__)  # (the drivers hold this object)
+        self.control.restart(self.cfg, self.colliders.specs)
+        self.colliders.reset()
+        if self.particles is not None:
+            self.particles.reset()
+        for body in self.bodies:
+            body.reset()
+
+    def warm_up(self, sizes=()) -> None:
+        """Compile what a game calls: a step with a burst from every emitter and every collider
+        moving, the read-backs and contact drains, a render at each (W, H) of ``sizes``; then
+        :meth:`reset` (a loading screen pays the compile cost, not the first frames)."""
+        ctl = self.control
+        for e in range(len(ctl.emitters)):
+            ctl.burst(e, 1)
+        for k in range(len(ctl.colliders)):
+            ctl.move_collider(k, 0.0, self.frame_dt, ctl.collider_positions(0.0)[k])
+        self.save_positions()
+        self.advance(self.frame_dt)
+        self.live_particles()
+        self.live_count()
+        if self.particles is not None:
+            self.particles.contacts()
+            self.particles.emitters.carry_local(0.0, 0.0, compile_only=True)
+        for body in self.bodies:
+            body.positions()
+            body.system.contact_log.drain()
+        for w, h in sizes:
+            self.render(w, h)
+        self.reset()
+
+    def save_positions(self) -> None:
+        if self.particles is not None:
+            self.particles.save_positions()
+
     def advance_frame(self) -> None:
         """Step to the next frame time; the live count is read back once per frame."""
         self.advance((self.frame + 1) * self.frame_dt - self.t)
@@ -120,14 +164,15 @@ class Scene:
         return self.particles.count_alive() if self.particles is not None else 0
 
     def render(self, width=None, height=None, camera=None, show_colliders=None, *, out=None,
-               transparent=False, bgra=False) -> np.ndarray:
+               transparent=False, bgra=False, alpha=None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA image of the current state (into ``out`` if given); any size and
-        camera, compiled once (engine.render.renderer)."""
+        camera, compiled once (engine.render.renderer). ``alpha``: draw particles that far from
+        their positions before the last step to their positions now (built with ``interpolate``)."""
         if self.renderer is None:
             raise RuntimeError("render: this scene was built with render=False")
         return self.renderer.render(camera or self.camera, width or self.width, height or self.height,
                                     out=out, show_colliders=show_colliders, transparent=transparent,
-                                    bgra=bgra)
+                                    bgra=bgra, blend=1.0 if alpha is None else float(alpha))
 
     # -- read-back ----------------------------------------------------------------------------
     @property

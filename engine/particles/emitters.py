@@ -14,6 +14,7 @@ from typing import List
 import numpy as np
 import taichi as ti
 
+from . import local_space as _local
 from . import spawn as _k
 from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
 
@@ -34,7 +35,8 @@ class EmitterClock:
 
     def schedule(self, t0: float, t1: float, inp):
         """Spawns for [t0, t1) not scheduled yet, from the emitter's input ``inp`` (rate,
-        emitting, pending bursts): a list of (count, birth-time start, span)."""
+        emitting, pending bursts): a list of (count, birth-time start, span, position or None:
+        at the emitter)."""
         out = []
         a, b = max(t0, self.until, self.start), min(t1, self.stop)
         self.until = max(self.until, t1)
@@ -43,12 +45,12 @@ class EmitterClock:
             k = int(math.floor(exact))
             self.carry = exact - k
             if k:
-                out.append((k, a, b - a))
+                out.append((k, a, b - a, None))
         while self.next_burst < len(self.bursts) and self.bursts[self.next_burst][0] < t1:
             tb, count = self.bursts[self.next_burst]
             self.next_burst += 1
-            out.append((count, max(tb, t0), 0.0))
-        out += [(count, t0, 0.0) for count in inp.bursts]
+            out.append((count, max(tb, t0), 0.0, None))
+        out += [(count, t0, 0.0, at) for count, at in inp.bursts]
         inp.bursts.clear()
         return out
 
@@ -89,15 +91,45 @@ class Emitters:
         # ring heads, serial numbers and counts: state the kernels and Python share
         self.emitter_head, self.emitter_serial = field([0] * E, ti.i32), field([0] * E, ti.i32)
         self.emitter_emitted, self.dropped = field([0] * E, ti.i32), field([0] * E, ti.i32)
-        self.clocks = [EmitterClock(c.start, math.inf if c.stop is None else c.stop,
-                                    sorted((b.time + j * b.interval, b.count) for b in c.bursts
-                                           for j in range(b.cycles))) for c in cs]
+        self.clocks = self._clocks()
+        # local space: live particles carried with the emitter's motion (engine.particles.local_space)
+        self.local = [e for e, c in enumerate(cs) if c.space == "local"]
+        self._carried = {e: self.position_at(e, 0.0) for e in self.local}
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
         self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
                        s.count, s.min_speed)
                       for p, c in enumerate(self.configs) for s in c.sub_emitters]
         if self.links:
             self.link_counts = ti.field(ti.i32, shape=CHUNKS)
+
+    def _clocks(self):
+        return [EmitterClock(c.start, math.inf if c.stop is None else c.stop,
+                             sorted((b.time + j * b.interval, b.count) for b in c.bursts for j in range(b.cycles)))
+                for c in self.configs]
+
+    def reset(self) -> None:
+        """Back to the start: clocks, ring heads, serial numbers and counts (a reused scene)."""
+        zero = np.zeros(self.count, np.int32)
+        if self.count:
+            for f in (self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped):
+                f.from_numpy(zero)
+        self.clocks = self._clocks()
+        self._carried = {e: self.position_at(e, 0.0) for e in self.local}
+
+    def carry_local(self, t0: float, t1: float, compile_only: bool = False) -> None:
+        """Move the particles of local-space emitters with their emitter over [t0, t1]: by the
+        motion within the span (a particle born in it by the part after its birth, the path being
+        linear over a step) plus any jump since the last carry (older particles only).
+        ``compile_only``: launch once over no slot (a warm-up)."""
+        if compile_only and self.local:
+            _local.carry(self.state, 0, 0, [0.0] * 3, [0.0] * 3, 1.0)
+            return
+        for e in self.local:
+            p0, p1 = self.position_at(e, t0), self.position_at(e, t1)
+            jump, self._carried[e] = p0 - self._carried[e], p1
+            if np.any(p1 != p0) or np.any(jump != 0):
+                _local.carry(self.state, self.layout.starts[e], self.layout.sizes[e],
+                             (p1 - p0).tolist(), jump.tolist(), t1 - t0)
 
     @property
     def uses_events(self) -> bool:
@@ -120,14 +152,16 @@ class Emitters:
             start, size = self.layout.starts[e], self.layout.sizes[e]
             a = adv[e]
             a[_k.A_SIZE] = size
-            for k, ts0, tspan in plan:
+            for k, ts0, tspan, at in plan:
                 skip = max(0, k - size)  # more than the whole ring at once: the excess never fits
                 k -= skip
                 a[_k.A_DROPPED] += skip
                 a[_k.A_SERIAL] += skip
                 if k:
                     rows.append((e, k, first, a[_k.A_HEAD], a[_k.A_SERIAL], start, size))
-                    vals.append((ts0, tspan, *pa, *pb, t0, h, *ev))
+                    # a burst placed by code: there, still (the emitter does not move)
+                    vals.append((ts0, tspan, *pa, *pb, t0, h, *ev) if at is None else
+                                (ts0, tspan, *at, *at, t0, h, 0.0, 0.0, 0.0))
                     first += k
                 a[_k.A_HEAD] += k
                 a[_k.A_SERIAL] += k

@@ -54,10 +54,13 @@ class ParticleState:
     ``particle_life`` (f32, s), ``particle_alive`` (i32 0/1), ``particle_emitter`` (i32),
     ``particle_rand`` (f32 in [0, 1): per-particle variation for size and colour).
     With adaptive stepping, ``cand_pos``/``cand_vel`` hold the attempted step; with sub-emitters,
-    ``particle_event`` and ``particle_impact`` record deaths and collisions (each allocated only then).
+    ``particle_event`` and ``particle_impact`` record deaths and collisions; with ``interpolate``,
+    ``particle_prev_pos`` (vec3 f32, m) holds where each particle was before the last game step
+    (NaN for a slot that was not alive then), what ``render(alpha=)`` draws from (each allocated
+    only then).
     """
 
-    def __init__(self, capacity: int, adaptive: bool, events: bool = False):
+    def __init__(self, capacity: int, adaptive: bool, events: bool = False, interpolate: bool = False):
         n = max(1, capacity)
         self.capacity = capacity
         vec3 = lambda: ti.Vector.field(3, ti.f32, shape=n)  # noqa: E731
@@ -71,3 +74,7 @@ class ParticleState:
             self.particle_impact = scalar(ti.f32)  # |Δv| of its last collision, m/s
         if adaptive:
             self.cand_pos, self.cand_vel = vec3(), vec3()
+        self.interpolate = bool(interpolate)
+        if interpolate:
+            self.particle_prev_pos = vec3()
+

@@ -97,10 +97,13 @@ class SpriteRecords:
 
 
 def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
-    """``sprites(o, f, r, u, th, W, H, lo_scale, lo_min_rad)``: every slot of the pool → its sprite
-    record. (o, f, r, u) is the camera's position and basis, th the tangent of half the vertical
-    field of view, W×H the image; sprites of full-resolution radius ≥ ``lo_min_rad`` px go to the
-    level-1 buffer of ``lo_scale``·W × ``lo_scale``·H (``lo_scale`` 1: everything at level 0)."""
+    """``sprites(o, f, r, u, th, W, H, lo_scale, lo_min_rad, blend)``: every slot of the pool → its
+    sprite record. (o, f, r, u) is the camera's position and basis, th the tangent of half the
+    vertical field of view, W×H the image; sprites of full-resolution radius ≥ ``lo_min_rad`` px go
+    to the level-1 buffer of ``lo_scale``·W × ``lo_scale``·H (``lo_scale`` 1: everything at level
+    0). A pool that keeps ``particle_prev_pos`` (``interpolate``) is drawn at
+    prev + blend·(pos − prev) (Fiedler, "Fix Your Timestep!": the fixed-step clock's alpha), a
+    particle without a previous position (NaN: born since) where it is; otherwise blend is unused."""
     S = state
     cap = S.capacity
     pos, vel, age, life, alive, pem, prand = (
@@ -109,18 +112,25 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
     look_at = look.make_func()
     additive, streak, size_rand = look.emitter_additive, look.emitter_streak, look.emitter_size_rand
     uses_alpha = look.uses_alpha
+    interp = getattr(S, "interpolate", False)
+    prev = S.particle_prev_pos if interp else pos
     geom, slook, tail, info, tiles, soft = (rec.spr_geom, rec.spr_look, rec.spr_tail, rec.spr_info,
                                             rec.spr_tiles, rec.spr_soft)
 
     @ti.kernel
     def sprites(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32, H: ti.i32,
-                lo_scale: ti.f32, lo_min_rad: ti.f32):
+                lo_scale: ti.f32, lo_min_rad: ti.f32, blend: ti.f32):
         for i in range(cap):
             nsub = 0
             if alive[i] != 0 and age[i] >= 0.0:  # (negative age: born later in this step)
                 e = pem[i]
                 tl = ti.min(1.0, age[i] / life[i])
-                dpos = pos[i] - o
+                x = pos[i]
+                if ti.static(interp):
+                    q = prev[i]
+                    if q[0] == q[0]:  # not NaN: it was alive before the last step
+                        x = q + blend * (x - q)
+                dpos = x - o
                 z = dpos.dot(f)
                 if z > 0.05:
                     lk = look_at(e, tl)
@@ -146,7 +156,7 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
                     tx, ty = cx, cy
                     nsub = 1
                     if is_streak:
-                        tpos = pos[i] - vel[i] * streak[e] - o
+                        tpos = x - vel[i] * streak[e] - o
                         st_scale = 0.5 * H / (ti.max(tpos.dot(f), 0.05) * th)
                         tx = (tpos.dot(r) * st_scale + 0.5 * W) * s
                         ty = (0.5 * H - tpos.dot(u) * st_scale) * s
