@@ -30,11 +30,15 @@ from . import checks, reuse
 from .budget import fit, hold, particle_budget, release, set_particle_budget
 from .builder import SceneBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
+from .particles.capacity import MAX_POOL
 from .clock import FixedTimestep
 from .config import ConfigError, load_config
 from .contacts import Contacts
 from .render.camera import Camera
 from .scene import Scene
+
+SPARE_EMITTERS = 4  # emitters add_emitter can write in place (rows beyond the config's)
+SPARE_SLOTS = 16_384  # pool slots for them (about 1.5 MB; dead slots cost a check per step)
 
 __all__ = ["ParticleScene", "SceneBuilder", "FixedTimestep", "Camera", "Contacts", "set_particle_budget",
            "particle_budget"]
@@ -61,11 +65,16 @@ class ParticleScene:
 
     ``contacts``: True (65,536) or the number of contact records kept between two
     :meth:`contacts` calls; ``render``: build the renderer; ``interpolate``: keep last-step
-    positions for ``render(alpha=)``; ``max_dt``: the longest ``step(dt)`` allowed (s)."""
+    positions for ``render(alpha=)``; ``max_dt``: the longest ``step(dt)`` allowed (s);
+    ``spare_emitters``, ``spare_slots``: room for emitters added by :meth:`add_emitter` without
+    compiling (parameter rows and pool slots beyond the config's)."""
 
     def __init__(self, config, contacts: bool | int = False, render: bool = True, *,
-                 interpolate: bool = False, max_dt: float = MAX_DT):
+                 interpolate: bool = False, max_dt: float = MAX_DT, spare_emitters: int = SPARE_EMITTERS,
+                 spare_slots: int = SPARE_SLOTS):
         where = type(self).__name__
+        self._spare = (integer(f"{where}: spare_emitters", spare_emitters, 0, 64),
+                       integer(f"{where}: spare_slots", spare_slots, 0, MAX_POOL))
         self._contacts = (65536 if contacts is True else
                           0 if contacts is False else integer(f"{where}: contacts", contacts, 0, MAX_CONTACTS))
         self._render = boolean(f"{where}: render", render)
@@ -78,6 +87,7 @@ class ParticleScene:
         else:
             raise TypeError(f"{where}: config: {checks.show(config)} is not a config dict or a validated config")
         self._finalizer, self._token, self.scene = None, None, None
+        self.last_add = None  # why the last add_emitter rebuilt the scene (None: added in place)
         self._install(data, where)
 
     def _install(self, data: dict, where: str, previous=None) -> None:
@@ -87,8 +97,9 @@ class ParticleScene:
         cfg = _load(where, data)
         release(self._token)  # this scene's own slots do not count against its rebuild
         try:
-            data, cfg, self.budget_scale = fit(data, cfg, lambda d: _load(where, d))
-            opts = dict(render=self._render, contacts=self._contacts, interpolate=self._interpolate)
+            data, cfg, self.budget_scale, spare = fit(data, cfg, lambda d: _load(where, d), self._spare)
+            opts = dict(render=self._render, contacts=self._contacts, interpolate=self._interpolate,
+                        spare=spare)
             key = reuse.key_for(cfg, **opts)
             scene = reuse.take(key) if previous is None else None
             if scene is not None:
@@ -364,7 +375,22 @@ class ParticleScene:
         self._rebuild(where, data)
 
     def add_emitter(self, emitter: dict) -> None:
-        self._add("add_emitter", "emitters", emitter)
+        """Add an emitter (a dict of config keys) between frames. One whose needs the scene
+        already compiled (its blend mode and force terms; no sub-emitters) and that fits the
+        spare rows and slots is written into them: nothing compiles. Otherwise the scene is
+        rebuilt around it (a compile), carrying live particles over."""
+        s = self._live("add_emitter")
+        if not isinstance(emitter, dict):
+            raise TypeError(f"add_emitter: {checks.show(emitter)} is not a dict of config keys")
+        data = copy.deepcopy(self._data)
+        data.setdefault("emitters", []).append(checks.plain(copy.deepcopy(emitter)))
+        cfg = _load("add_emitter", data)
+        self.last_add = s.why_not_add(cfg)  # None: added in place
+        if self.last_add is None:
+            s.add_emitters(cfg)
+            self.cfg, self._data = cfg, data
+        else:
+            self._rebuild("add_emitter", data)
 
     def remove_emitter(self, name: str) -> None:
         self._live("remove_emitter")

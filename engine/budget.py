@@ -30,21 +30,25 @@ def particle_budget() -> tuple:
     return _limit[0], sum(_used.values())
 
 
-def fit(data: dict, cfg, load):
-    """``(data, cfg, scale)``: the scene's config as the budget lets it be built. ``cfg`` is
-    ``data`` validated; ``load(data)`` validates a changed copy. ``scale`` is 1 when it fits."""
+def fit(data: dict, cfg, load, spare=(0, 0)):
+    """``(data, cfg, scale, spare)``: the scene's config as the budget lets it be built, and its
+    spare (emitter rows, slots) for emitters added later. ``cfg`` is ``data`` validated;
+    ``load(data)`` validates a changed copy. ``scale`` is 1 when it fits; short of room the spare
+    slots go first (no spare: add_emitter rebuilds), then the emitters' pools shrink."""
     limit = _limit[0]
-    sizes = pool_sizes(cfg.emitters, 1.0 / cfg.fps)
+    sizes = pool_sizes(cfg.emitters, 1.0 / cfg.fps) if cfg.emitters else []
     need, left = sum(sizes), (None if limit is None else limit - sum(_used.values()))
-    if left is None or need <= left:
-        return data, cfg, 1.0
+    if left is None or need + spare[1] <= left:
+        return data, cfg, 1.0, tuple(spare)
+    if need <= left:
+        return data, cfg, 1.0, (spare[0], 0)
     if left < len(sizes):
         raise ValueError(f"set_particle_budget: {limit:,} slots is not enough: scenes hold {limit - left:,}, "
                          f"this one needs {need:,} and at least {len(sizes)} (one per emitter)")
     scale = left / need
     emitters = [dict(e, capacity=max(1, math.floor(n * scale))) for e, n in zip(data["emitters"], sizes)]
     data = dict(data, emitters=emitters)
-    return data, load(data), scale
+    return data, load(data), scale, (spare[0], 0)
 
 
 def hold(token, slots: int) -> None:

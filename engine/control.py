@@ -90,7 +90,8 @@ class Control:
         self.body_names: List[str] = [""] * bodies
 
     @staticmethod
-    def _inputs(cfg, collider_specs):
+    def inputs_for(cfg, collider_specs):
+        """(emitter inputs, collider inputs) a validated config starts with."""
         ems = [EmitterInput(_vec(e.position), e.rate, e.emitting,
                             [(k.time, _vec(k.position)) for k in e.path], name=e.name) for e in cfg.emitters]
         return ems, [ColliderInput.from_spec(s) for s in collider_specs]
@@ -98,7 +99,7 @@ class Control:
     @classmethod
     def for_scene(cls, cfg, collider_specs) -> "Control":
         """The inputs a validated config starts with."""
-        ems, cols = cls._inputs(cfg, collider_specs)
+        ems, cols = cls.inputs_for(cfg, collider_specs)
         new = cls(cfg.forces.gravity, cfg.forces.wind, ems, cols, len(cfg.bodies))
         new.body_names = [b.name for b in cfg.bodies]
         return new
@@ -108,7 +109,7 @@ class Control:
         and systems built against them stay valid; a scene reused for a level restart)."""
         self.set_gravity(cfg.forces.gravity)
         self.set_wind(cfg.forces.wind)
-        ems, cols = self._inputs(cfg, collider_specs)
+        ems, cols = self.inputs_for(cfg, collider_specs)
         self.emitters[:], self.colliders[:] = ems, cols
         for pending in self.pins:
             pending.clear()

@@ -52,16 +52,17 @@ class Scene:
     ``render()`` draws the current state."""
 
     def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, previous=None,
-                 interpolate: bool = False):
+                 interpolate: bool = False, spare=(0, 0)):
         """``contacts``: keep up to this many particle–collider contact records between drains
         (0: the contact code is not compiled), and as many node contacts for each body whose
         config asks for them. ``interpolate``: keep the particles' positions before each game
         step (:meth:`save_positions`) so ``render(alpha=)`` can draw between the last two steps.
+        ``spare``: (emitter rows, pool slots) beyond the config's, for :meth:`add_emitters`.
         ``previous``: the scene this one replaces (a rebuild
         between frames): its time, statistics, inputs and live particles carry over by name, and
         its soft bodies whose config did not change are kept without recompiling them."""
         runtime.ensure_init()
-        self.cfg = cfg
+        self.cfg = self._built = cfg
         self.t = 0.0
         self.frame = 0
         self.frame_dt = 1.0 / cfg.fps
@@ -73,8 +74,8 @@ class Scene:
         else:
             self.control = previous.control.rebuilt(cfg, specs)
             self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
-        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate)
-                          if cfg.emitters else None)
+        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate,
+                                         spare) if cfg.emitters else None)
         if previous is not None and previous.particles is not None and self.particles is not None:
             self.particles.carry_from(previous.particles)
         self.bodies = []
@@ -97,7 +98,7 @@ class Scene:
 
             p = self.particles
             self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
-                                     bodies=self.bodies)
+                                     bodies=self.bodies, rows=p.emitters.count if p else 0)
         self.width = int(width or cfg.render.width)
         self.height = int(height or cfg.render.height)
 
@@ -110,10 +111,34 @@ class Scene:
             body.step(self.t, dt)
         self.t += dt
 
+    def why_not_add(self, cfg):
+        """Why the emitters ``cfg`` appends to this scene's config cannot be added in place
+        (:meth:`add_emitters`), or None."""
+        if self.particles is None:
+            return "the scene was built without particles"
+        look = self.renderer.look if self.renderer is not None else None
+        if look is not None and not look.covers(cfg.emitters):
+            return "it needs a blend mode the scene did not compile"
+        return self.particles.why_not_add(cfg)
+
+    def add_emitters(self, cfg) -> None:
+        """Add the emitters ``cfg`` appends, in place: spare rows and slots, no compile."""
+        n = len(self.cfg.emitters)
+        self.control.emitters.extend(Control.inputs_for(cfg, ())[0][n:])
+        self.particles.add_emitters(cfg)
+        if self.renderer is not None:
+            self.renderer.look.update(cfg.emitters)
+        self.cfg = cfg
+
     def reset(self) -> None:
         """Back to the state the build left (t = 0, the config's inputs, empty pools, bodies at
-        rest), keeping every field, compiled kernel and render target: a level restart costs
-        launches, not compiles. The same config then gives the same bytes as a fresh build."""
+        rest, emitters added since removed), keeping every field, compiled kernel and render
+        target: a level restart costs launches, not compiles. The same config then gives the
+        same bytes as a fresh build."""
+        if self.cfg is not self._built:
+            self.cfg = self._built
+            if self.renderer is not None and self.particles is not None:
+                self.renderer.look.update(self._built.emitters)
         self.t, self.frame = 0.0, 0
         self.stats.__dict__.update(Stats().__dict__)  # (the drivers hold this object)
         self.control.restart(self.cfg, self.colliders.specs)

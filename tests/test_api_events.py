@@ -184,3 +184,33 @@ def test_a_new_render_size_and_a_warmed_up_scene_compile_nothing():
     s.render(200, 120)  # a size never drawn before
     s.render(33, 17, transparent=True, bgra=True)
     assert compiled() == before
+
+
+def test_add_emitter_of_a_compiled_kind_writes_spare_rows_and_a_restart_takes_it_away():
+    data = dict(fps=60, render={"width": 48, "height": 32},
+                emitters=[{"name": "e", "effect": "sparks", "rate": 200.0}])
+    s = ParticleScene(data)
+    s.warm_up(sizes=[(48, 32)])
+    before = compiled(taichi_own=True)
+    s.step(1 / 60)
+    s.add_emitter({"name": "jet", "effect": "sparks", "rate": 300.0, "position": (1.0, 0.0, 0.0),
+                   "space": "local"})
+    assert s.last_add is None and [e.name for e in s.cfg.emitters] == ["e", "jet"]
+    for _ in range(6):
+        s.step(1 / 60)
+    s.move_emitter("jet", [1.5, 0.0, 0.0])
+    s.burst("jet", 20, position=[0.0, 3.0, 0.0])
+    s.step(1 / 60)
+    p = s.particles()
+    jet = p["emitter"] == 1
+    assert 25 <= jet.sum() - 20 <= 40 and (p["position"][jet, 1] > 2.9).sum() == 20
+    s.render()
+    assert compiled(taichi_own=True) == before  # nothing compiled for the new emitter
+    s.close()
+    s = ParticleScene(data)  # a restart: the same scene, the emitter it gained taken away
+    assert compiled(taichi_own=True) == before
+    assert [e.name for e in s.cfg.emitters] == ["e"] and s.scene.particles.layout.spare == 16_384
+    s.step(1 / 60)
+    assert set(s.particles()["emitter"].tolist()) == {0}
+    s.add_emitter({"name": "haze", "effect": "smoke", "rate": 10.0})  # alpha blending: not compiled
+    assert "blend mode" in s.last_add and [e.name for e in s.cfg.emitters] == ["e", "haze"]

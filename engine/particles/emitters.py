@@ -60,47 +60,74 @@ class Emitters:
     """Per-emitter parameters as fields (shape (E,)), ring heads and serial counters (fields, so
     kernels and Python share one truth) and the clocks; ``inputs``: the control's emitter inputs."""
 
-    def __init__(self, configs, layout, seed: int, inputs, state):
-        self.configs = list(configs)
+    def __init__(self, configs, layout, seed: int, inputs, state, rows: int = 0):
+        """``rows``: parameter rows to allocate (at least one per emitter): spare rows let
+        emitters be added later (:meth:`set_configs`) without new fields or compiles."""
         self.layout, self.seed, self.inputs, self.state = layout, int(seed), inputs, state
-        E = len(self.configs)
-        self.count = E
-        self.index = {c.name: e for e, c in enumerate(self.configs) if c.name}
-        cs = self.configs
-
-        def field(values, dtype=ti.f32):  # one parameter for every emitter, shape (E,) or (E, 3)
-            a = np.asarray(values, np.float32 if dtype == ti.f32 else np.int32).reshape(E, -1)
-            fld = ti.field(dtype, shape=E) if a.shape[1] == 1 else ti.Vector.field(a.shape[1], dtype, shape=E)
-            if E:
-                fld.from_numpy(a[:, 0] if a.shape[1] == 1 else a)
-            return fld
-
-        direction = np.array([c.direction for c in cs], np.float64).reshape(E, 3)
-        self.emitter_shape = field([SHAPES[c.shape] for c in cs], ti.i32)
-        self.emitter_surface = field([int(c.surface) for c in cs], ti.i32)
-        self.emitter_radius = field([c.radius for c in cs])
-        self.emitter_cos_spread = field([math.cos(math.radians(c.spread)) for c in cs])
-        self.emitter_speed_min = field([c.speed[0] for c in cs])
-        self.emitter_speed_max = field([c.speed[1] for c in cs])
-        self.emitter_inherit = field([c.inherit_velocity for c in cs])
-        self.emitter_life = field([c.lifetime for c in cs])
-        self.emitter_life_rand = field([c.lifetime_randomness for c in cs])
-        self.emitter_drag = field([-1.0 if c.drag is None else c.drag for c in cs])  # −1: the scene's drag
-        self.emitter_box = field([c.box_size for c in cs])
-        self.emitter_dir = field(direction / np.linalg.norm(direction, axis=1, keepdims=True))
+        self.count = R = max(len(configs), int(rows))  # rows: a compile-time bound of the spawn kernel
+        self._params = {}
+        for name, (a, dtype) in self._arrays(configs).items():
+            vec = a.ndim == 2
+            fld = ti.Vector.field(a.shape[1], dtype, shape=R) if vec else ti.field(dtype, shape=R)
+            setattr(self, name, fld)
+            self._params[name] = fld
         # ring heads, serial numbers and counts: state the kernels and Python share
-        self.emitter_head, self.emitter_serial = field([0] * E, ti.i32), field([0] * E, ti.i32)
-        self.emitter_emitted, self.dropped = field([0] * E, ti.i32), field([0] * E, ti.i32)
-        self.clocks = self._clocks()
-        # local space: live particles carried with the emitter's motion (engine.particles.local_space)
-        self.local = [e for e, c in enumerate(cs) if c.space == "local"]
-        self._carried = {e: self.position_at(e, 0.0) for e in self.local}
+        self.emitter_head, self.emitter_serial = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
+        self.emitter_emitted, self.dropped = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
+        self.set_configs(configs)
+        if R:
+            self._zero_counters()
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
-        self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
-                       s.count, s.min_speed)
-                      for p, c in enumerate(self.configs) for s in c.sub_emitters]
         if self.links:
             self.link_counts = ti.field(ti.i32, shape=CHUNKS)
+
+    def _arrays(self, cs) -> dict:
+        """name → (array of shape (rows,) or (rows, 3), dtype) of every per-emitter parameter;
+        rows past the emitters are zero."""
+        def pad(values, dtype=ti.f32):
+            a = np.zeros((self.count,) + np.shape(values)[1:], np.float32 if dtype == ti.f32 else np.int32)
+            a[: len(values)] = values
+            return a, dtype
+
+        direction = np.array([c.direction for c in cs], np.float64).reshape(len(cs), 3)
+        return dict(
+            emitter_shape=pad([SHAPES[c.shape] for c in cs], ti.i32),
+            emitter_surface=pad([int(c.surface) for c in cs], ti.i32),
+            emitter_radius=pad([c.radius for c in cs]),
+            emitter_cos_spread=pad([math.cos(math.radians(c.spread)) for c in cs]),
+            emitter_speed_min=pad([c.speed[0] for c in cs]),
+            emitter_speed_max=pad([c.speed[1] for c in cs]),
+            emitter_inherit=pad([c.inherit_velocity for c in cs]),
+            emitter_life=pad([c.lifetime for c in cs]),
+            emitter_life_rand=pad([c.lifetime_randomness for c in cs]),
+            emitter_drag=pad([-1.0 if c.drag is None else c.drag for c in cs]),  # −1: the scene's drag
+            emitter_box=pad(np.array([c.box_size for c in cs], np.float64).reshape(len(cs), 3)),
+            emitter_dir=pad(direction / np.linalg.norm(direction, axis=1, keepdims=True)),
+        )
+
+    def set_configs(self, configs) -> None:
+        """Write every emitter's parameters (``configs``: the emitters there were, unchanged and
+        in order, then any new ones, at most ``count`` in all); new emitters get fresh clocks.
+        Writes fields only: nothing is allocated or compiled (after the first call)."""
+        cs = self.configs = list(configs)
+        if self.count:
+            for name, (a, _) in self._arrays(cs).items():
+                self._params[name].from_numpy(a)
+        self.index = {c.name: e for e, c in enumerate(cs) if c.name}
+        kept = getattr(self, "clocks", [])[: len(cs)]
+        self.clocks = kept + self._clocks()[len(kept):]
+        # local space: live particles carried with the emitter's motion (engine.particles.local_space)
+        self.local = [e for e, c in enumerate(cs) if c.space == "local"]
+        carried = getattr(self, "_carried", {})
+        self._carried = {e: carried.get(e, self.position_at(e, 0.0)) for e in self.local}
+        self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
+                       s.count, s.min_speed)
+                      for p, c in enumerate(cs) for s in c.sub_emitters]
+
+    def _zero_counters(self) -> None:
+        zero = np.zeros(self.count, np.int32)
+        for f in (self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped):
+            f.from_numpy(zero)
 
     def _clocks(self):
         return [EmitterClock(c.start, math.inf if c.stop is None else c.stop,
@@ -109,10 +136,8 @@ class Emitters:
 
     def reset(self) -> None:
         """Back to the start: clocks, ring heads, serial numbers and counts (a reused scene)."""
-        zero = np.zeros(self.count, np.int32)
         if self.count:
-            for f in (self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped):
-                f.from_numpy(zero)
+            self._zero_counters()
         self.clocks = self._clocks()
         self._carried = {e: self.position_at(e, 0.0) for e in self.local}
 
@@ -120,8 +145,9 @@ class Emitters:
         """Move the particles of local-space emitters with their emitter over [t0, t1]: by the
         motion within the span (a particle born in it by the part after its birth, the path being
         linear over a step) plus any jump since the last carry (older particles only).
-        ``compile_only``: launch once over no slot (a warm-up)."""
-        if compile_only and self.local:
+        ``compile_only``: launch once over no slot (a warm-up: also for a local emitter added
+        later)."""
+        if compile_only:
             _local.carry(self.state, 0, 0, [0.0] * 3, [0.0] * 3, 1.0)
             return
         for e in self.local:
@@ -194,7 +220,7 @@ class Emitters:
                               min_speed, c, L.starts[c], L.sizes[c], count)
 
     def dropped_counts(self) -> np.ndarray:
-        return self.dropped.to_numpy()[: self.count]
+        return self.dropped.to_numpy()[: len(self.configs)]
 
     def emitted_counts(self) -> np.ndarray:
-        return self.emitter_emitted.to_numpy()[: self.count]
+        return self.emitter_emitted.to_numpy()[: len(self.configs)]

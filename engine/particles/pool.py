@@ -22,23 +22,39 @@ from .capacity import emitter_capacity, pool_sizes  # noqa: F401  (re-exported)
 
 @dataclass
 class PoolLayout:
-    """Model: where each emitter's ring lives. ``starts[e]``, ``sizes[e]``, ``capacity`` total."""
+    """Model: where each emitter's ring lives. ``starts[e]``, ``sizes[e]``, ``capacity`` total;
+    ``spare`` slots after the rings, for emitters added later without reallocating (the
+    capacity, a compile-time constant of the kernels, stays)."""
 
     starts: List[int]
     sizes: List[int]
+    spare: int = 0
 
     @property
     def capacity(self) -> int:
-        return sum(self.sizes)
+        return sum(self.sizes) + self.spare
 
     @classmethod
-    def for_emitters(cls, emitters, frame_dt: float) -> "PoolLayout":
+    def for_emitters(cls, emitters, frame_dt: float, spare: int = 0) -> "PoolLayout":
         sizes = pool_sizes(emitters, frame_dt)
         starts, acc = [], 0
         for s in sizes:
             starts.append(acc)
             acc += s
-        return cls(starts, sizes)
+        return cls(starts, sizes, int(spare))
+
+    def take(self, size: int) -> None:
+        """A ring of ``size`` slots for a new emitter, from the spare slots."""
+        if size > self.spare:
+            raise ValueError(f"{size} slots wanted, {self.spare} spare")
+        self.starts.append(sum(self.sizes))
+        self.sizes.append(int(size))
+        self.spare -= int(size)
+
+    def drop_after(self, n: int) -> None:
+        """Give the rings of emitters n, n+1, ... back to the spare slots."""
+        self.spare += sum(self.sizes[n:])
+        del self.starts[n:], self.sizes[n:]
 
 
 # the per-slot state every pool has (optional ones are listed in ParticleState's docstring)

@@ -21,7 +21,7 @@ from . import integrate
 from .emitters import Emitters
 from .forces import Forces
 from .integrate import NO_FAILURE, ParticleIntegrator
-from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout
+from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout, pool_sizes
 from .slots import clear as clear_pool
 from .slots import save_positions
 
@@ -30,17 +30,21 @@ MAX_RUN = 32  # fixed steps fused into one launch at most (a stop request waits 
 
 
 class ParticleSystem:
-    def __init__(self, cfg, colliders, control, stats, contacts: int = 0, interpolate: bool = False):
-        self.cfg = cfg
+    def __init__(self, cfg, colliders, control, stats, contacts: int = 0, interpolate: bool = False,
+                 spare=(0, 0)):
+        """``spare``: (emitter rows, pool slots) allocated beyond the config's, so emitters can be
+        added between frames without new fields or compiles (:meth:`add_emitters`)."""
+        self.cfg = self._built = cfg
         sol = cfg.solver
         self.method, self.adaptive, self.stats = sol.integrator, sol.adaptive, stats
         self.label = f"integrator {self.method}"
         self.control = control
-        self.layout = PoolLayout.for_emitters(cfg.emitters, 1.0 / cfg.fps)
+        self.layout = PoolLayout.for_emitters(cfg.emitters, 1.0 / cfg.fps, spare[1])
+        rows = len(cfg.emitters) + int(spare[0])
         events = any(e.sub_emitters for e in cfg.emitters)
         self.state = ParticleState(self.layout.capacity, self.adaptive, events, interpolate)
-        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state)
-        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control)
+        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state, rows)
+        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control, rows)
         self.colliders = colliders
         collide = colliders.make_func(report=True) if colliders.count else None
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
@@ -119,9 +123,43 @@ class ParticleSystem:
         f[None] = NO_FAILURE
         return bad
 
+    # -- emitters added between frames ----------------------------------------------------------
+    def why_not_add(self, cfg):
+        """Why ``cfg`` (this scene's config with emitters appended) cannot take its new emitters
+        in place, or None: they need spare rows and slots, the compiled force terms and no
+        sub-emitter links."""
+        n, new = len(self.cfg.emitters), cfg.emitters[len(self.cfg.emitters):]
+        if cfg.model_copy(update={"emitters": list(self.cfg.emitters)}) != self.cfg:
+            return "the config changed elsewhere"
+        if len(cfg.emitters) > self.emitters.count:
+            return f"no spare emitter row ({self.emitters.count - n} spare)"
+        need = sum(pool_sizes(cfg.emitters, 1.0 / cfg.fps)[n:])
+        if need > self.layout.spare:
+            return f"its pool needs {need:,} slots, {self.layout.spare:,} spare"
+        if any(e.sub_emitters for e in new):
+            return "it has sub-emitters"
+        if not self.forces.covers(cfg.forces, cfg.emitters):
+            return "it needs a force term the scene did not compile"
+        return None
+
+    def add_emitters(self, cfg) -> None:
+        """Take the emitters ``cfg`` appends (checked by :meth:`why_not_add`; their inputs already
+        in the control): rings from the spare slots, parameters into spare rows. Writes fields
+        only: nothing is allocated or compiled."""
+        for size in pool_sizes(cfg.emitters, 1.0 / cfg.fps)[len(self.cfg.emitters):]:
+            self.layout.take(size)
+        self.emitters.set_configs(cfg.emitters)
+        self.forces.set_emitters(cfg.emitters)
+        self.cfg = cfg
+
     def reset(self) -> None:
-        """Back to the state the build left (an empty pool at t = 0), keeping every field and
-        compiled kernel: a scene reused for a level restart."""
+        """Back to the state the build left (an empty pool at t = 0, the built emitters only),
+        keeping every field and compiled kernel: a scene reused for a level restart."""
+        if self.cfg is not self._built:
+            self.layout.drop_after(len(self._built.emitters))
+            self.emitters.set_configs(self._built.emitters)
+            self.forces.set_emitters(self._built.emitters)
+            self.cfg = self._built
         clear_pool(self.state)
         self.emitters.reset()
         I = self.integrator

@@ -51,7 +51,7 @@ class Renderer:
     """Draws one scene. ``state``/``emitter_configs`` may be None/empty (a soft-body scene: no
     sprite kernels are built); ``bodies`` are drawn as meshes and lines."""
 
-    def __init__(self, state, emitter_configs, colliders, render_cfg, bodies=(), schedule=None):
+    def __init__(self, state, emitter_configs, colliders, render_cfg, bodies=(), schedule=None, rows: int = 0):
         self.cfg = render_cfg
         self.shading = float(render_cfg.density_shading)
         self.colliders = colliders
@@ -64,7 +64,7 @@ class Renderer:
         self._background = build_background_kernel(render_cfg, colliders)
         uses_add = uses_alpha = False
         if self.has_particles:
-            self.look = Look(emitter_configs)
+            self.look = Look(emitter_configs, rows)  # (rows: spare emitter rows, engine.api add_emitter)
             uses_add, uses_alpha = self.look.uses_additive, self.look.uses_alpha
             self.records = SpriteRecords(state.capacity)
             self._sprites = build_sprite_kernel(state, self.look, self.records)

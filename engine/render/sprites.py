@@ -49,25 +49,43 @@ class Look:
     per frame cost more than the projection); ``emitter_additive`` (i32), ``emitter_streak`` (f32,
     s of motion blur), ``emitter_size_rand``."""
 
-    def __init__(self, emitter_configs):
-        E = len(emitter_configs)
+    def __init__(self, emitter_configs, rows: int = 0):
+        """``rows``: emitter rows (spare ones for emitters added later: :meth:`update`)."""
+        self.rows = R = max(len(emitter_configs), int(rows))
+        self.look_table = ti.Vector.field(8, ti.f32, shape=(R, LOOK_SAMPLES + 1))
+        self.emitter_additive = ti.field(ti.i32, shape=R)
+        self.emitter_streak = ti.field(ti.f32, shape=R)
+        self.emitter_size_rand = ti.field(ti.f32, shape=R)
+        self.update(emitter_configs)
+        self.uses_alpha = any(c.blend == "alpha" for c in emitter_configs)
+        self.uses_additive = any(c.blend == "additive" for c in emitter_configs)
+
+    def covers(self, emitter_configs) -> bool:
+        """Whether the compiled blend modes and rows serve these emitters."""
+        return len(emitter_configs) <= self.rows and all(
+            self.uses_alpha if c.blend == "alpha" else self.uses_additive for c in emitter_configs)
+
+    def update(self, emitter_configs) -> None:
+        """Bake every emitter's ramps and write the fields (rows past the emitters are zero)."""
+        R = self.rows
         t = np.linspace(0.0, 1.0, LOOK_SAMPLES + 1)
-        table = np.zeros((E, LOOK_SAMPLES + 1, 8), np.float32)
+        table = np.zeros((R, LOOK_SAMPLES + 1, 8), np.float32)
         for e, c in enumerate(emitter_configs):
             for col, (ramp, comp) in enumerate([(c.color, 1), (c.color, 2), (c.color, 3), (c.alpha, 1),
                                                 (c.size, 1)]):
                 stops = np.asarray(ramp, np.float64)
                 table[e, :, col] = np.interp(t, stops[:, 0], stops[:, comp])  # flat outside
-        self.look_table = ti.Vector.field(8, ti.f32, shape=(E, LOOK_SAMPLES + 1))
         self.look_table.from_numpy(table)
-        self.emitter_additive = ti.field(ti.i32, shape=E)
-        self.emitter_streak = ti.field(ti.f32, shape=E)
-        self.emitter_size_rand = ti.field(ti.f32, shape=E)
-        self.emitter_additive.from_numpy(np.array([int(c.blend == "additive") for c in emitter_configs], np.int32))
-        self.emitter_streak.from_numpy(np.array([c.streak for c in emitter_configs], np.float32))
-        self.emitter_size_rand.from_numpy(np.array([c.size_randomness for c in emitter_configs], np.float32))
-        self.uses_alpha = any(c.blend == "alpha" for c in emitter_configs)
-        self.uses_additive = any(c.blend == "additive" for c in emitter_configs)
+
+        def rows(values, dtype):
+            a = np.zeros(R, dtype)
+            a[: len(values)] = values
+            return a
+
+        cs = emitter_configs
+        self.emitter_additive.from_numpy(rows([int(c.blend == "additive") for c in cs], np.int32))
+        self.emitter_streak.from_numpy(rows([c.streak for c in cs], np.float32))
+        self.emitter_size_rand.from_numpy(rows([c.size_randomness for c in cs], np.float32))
 
     def make_func(self):
         """``look_at(e, t)`` → vec8 (R, G, B, alpha, size) of emitter e at normalised life t."""
