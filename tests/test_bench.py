@@ -17,10 +17,14 @@ EXPECTED = {
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
     "features": ["all features", "none of them"],
     "output": ["sim + render (no output)", "particles run, 1 encoder"],
+    "api": ["first build of sparks", "level restart", "second copy, prepared", "3 build/discard cycles",
+            "add_emitter, effect compiled", "a new render size", "argument checks per frame",
+            "first call, new field (template)", "first call, new ndarray"],
 }
-# start-up runs `particles run` in subprocesses (a cold compile each) and output builds three
-# scenes: together half the quick bench's time, so they run with the slow tests
-SLOW = ("startup", "output")
+# start-up runs `particles run` in subprocesses (a cold compile each), output builds three
+# scenes and api two (and prepares a third): together over half the quick bench's time, so they
+# run with the slow tests
+SLOW = ("startup", "output", "api")
 
 
 def check_rows(rows, sections):
@@ -52,3 +56,5 @@ def test_quick_bench_startup_and_output_sections():
     check_rows(rows, SLOW)
     ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra]
     assert len(ratios) == 2 and all(0 < q < 10 for q in ratios)
+    share = [r.extra["checks_share"] for r in rows if "checks_share" in r.extra]
+    assert len(share) == 1 and 0 < share[0] < 1
