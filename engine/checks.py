@@ -50,6 +50,11 @@ LIMITS = {
     "contacts (build)": f"bool or a whole number 0 to {MAX_CONTACTS:,} (records kept between drains)",
     "emitter, collider, body (add_*)": "a dict of config keys, checked as a config is",
     "n (set_particle_budget)": "None (no budget) or a whole number >= 0 of pool slots",
+    "render, interpolate (build)": "bool",
+    "spare_emitters, spare_slots (build)": "whole numbers, 0 to 64 and 0 to 50,000,000",
+    "copies (prepare)": "a whole number, 1 to 64",
+    "sizes (warm_up, prepare)": "(width, height) pairs, as render's",
+    "dt, max_steps (FixedTimestep)": "dt finite in (0, 1] s; max_steps a whole number, 1 to 100,000",
 }
 
 

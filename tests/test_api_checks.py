@@ -189,3 +189,13 @@ def test_clock_budget_and_builder_arguments():
     b = (SceneBuilder(fps=30.0).forces(gravity=[0.0, -1.0, 0.0])
          .emitter(name="e", rate=5.0, position=[1, 2, 3], color=[[0.0, 1, 1, 1]]))
     assert a.data == b.data
+
+
+def test_the_readme_table_lists_every_limit():
+    import os
+
+    from engine.checks import LIMITS
+
+    text = open(os.path.join(os.path.dirname(__file__), "..", "README.md"), encoding="utf-8").read()
+    missing = [k for k, v in LIMITS.items() if f"| {k} | {v} |" not in text]
+    assert not missing, missing
