@@ -51,11 +51,10 @@ def _load(where: str, data: dict):
         raise ValueError(f"{where}: {'; '.join(e.problems)}") from None
 
 
-def _discard(key, scene, token) -> None:
+def _discard(key, scene, token, program) -> None:
     """A ParticleScene went away: its slots return to the budget, its scene to the pool."""
     release(token)
-    if scene is not None:
-        reuse.give_back(key, scene)
+    reuse.give_back(key, scene, program)
 
 
 class ParticleScene:
@@ -118,7 +117,7 @@ class ParticleScene:
         self.scene, self.cfg, self._data, self._key = scene, cfg, data, key
         self._token = object()
         hold(self._token, scene.capacity)
-        self._finalizer = weakref.finalize(self, _discard, key, scene, self._token)
+        self._finalizer = weakref.finalize(self, _discard, key, scene, self._token, reuse.program())
 
     @classmethod
     def from_file(cls, path, **kw) -> "ParticleScene":

@@ -21,6 +21,12 @@ from . import runtime
 
 _idle: dict = {}  # key -> [Scene, ...]
 counts = {"built": 0, "reused": 0}
+_program = [0]  # which Taichi program the scenes belong to (engine.runtime.reset starts another)
+
+
+def program() -> int:
+    """The current program's number: a scene built under another is dead."""
+    return _program[0]
 
 
 def key_for(cfg, **options) -> str:
@@ -37,8 +43,11 @@ def take(key: str):
     return None
 
 
-def give_back(key: str, scene) -> None:
-    _idle.setdefault(key, []).append(scene)
+def give_back(key: str, scene, built_in: int) -> None:
+    """Keep ``scene`` (built under program ``built_in``) for the next scene of its key; one of an
+    earlier program is dropped (its fields died with it)."""
+    if built_in == _program[0]:
+        _idle.setdefault(key, []).append(scene)
 
 
 def idle(key: str | None = None) -> int:
@@ -48,6 +57,7 @@ def idle(key: str | None = None) -> int:
 
 def forget() -> None:
     _idle.clear()
+    _program[0] += 1
 
 
 runtime.on_reset(forget)

@@ -1,5 +1,6 @@
 """The engine from a game loop: the Python API, fixed timestep, control, contacts, read-back."""
 import numpy as np
+import pytest
 
 from engine.api import FixedTimestep, ParticleScene, SceneBuilder
 from engine.render.camera import Camera
@@ -136,6 +137,7 @@ def test_independent_scenes_in_one_process_and_rebuilds_keep_particles():
     assert len(a.particles()["position"]) == 3000  # removing a collider keeps the particles
 
 
+@pytest.mark.slow  # (a scene with smoke, sparks and a cloth, 330 rendered frames: ~40 s under load)
 def test_game_example_runs_headless():
     """The pygame example, headless: contacts flash the ball, sparks fly on landings, the level
     restarts by reusing its scene, and the overlay composites over the game's own frame."""

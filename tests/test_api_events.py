@@ -214,3 +214,14 @@ def test_add_emitter_of_a_compiled_kind_writes_spare_rows_and_a_restart_takes_it
     assert set(s.particles()["emitter"].tolist()) == {0}
     s.add_emitter({"name": "haze", "effect": "smoke", "rate": 10.0})  # alpha blending: not compiled
     assert "blend mode" in s.last_add and [e.name for e in s.cfg.emitters] == ["e", "haze"]
+
+
+def test_a_scene_of_an_earlier_taichi_program_is_not_kept():
+    from engine import runtime
+
+    s = ParticleScene({"emitters": [{"name": "e", "rate": 10.0}]}, render=False)
+    key = s._key
+    runtime.reset()  # every field and kernel of the program dies
+    runtime.init("cpu")
+    del s
+    assert reuse.idle(key) == 0
