@@ -57,8 +57,9 @@ class EmitterClock:
 
 @ti.data_oriented
 class Emitters:
-    """Per-emitter parameters as fields (shape (E,)), ring heads and serial counters (fields, so
-    kernels and Python share one truth) and the clocks; ``inputs``: the control's emitter inputs."""
+    """Per-emitter parameters as fields (shape (rows,): one row per emitter, spare rows zero),
+    ring heads and serial counters (fields, so kernels and Python share one truth) and the
+    clocks; ``inputs``: the control's emitter inputs."""
 
     def __init__(self, configs, layout, seed: int, inputs, state, rows: int = 0):
         """``rows``: parameter rows to allocate (at least one per emitter): spare rows let
