@@ -19,11 +19,14 @@ EXPECTED = {
     "features": ["all features", "none of them"],
     "output": ["sim + render (no output)", "particles run, 1 encoder"],
     "wedge": ["2 x particles run, one after another", "particles wedge, 2 workers x 1 thread"],
+    "api": ["first build of sparks", "level restart", "second copy, prepared", "3 build/discard cycles",
+            "add_emitter, effect compiled", "a new render size", "argument checks per frame",
+            "first call, new field (template)", "first call, new ndarray"],
 }
-# the sections that build scenes (a compile each: frame, effects, features, cloth, output), run
-# `particles run` in subprocesses (startup) or start Dask workers (wedge) run with the slow tests;
-# the default run checks the table with the step and ODE sections
-SLOW = ("frame", "startup", "output", "effects", "features", "cloth", "wedge")
+# the sections that build scenes (a compile each: frame, effects, features, cloth, output, api),
+# run `particles run` in subprocesses (startup) or start Dask workers (wedge) run with the slow
+# tests; the default run checks the table with the step and ODE sections
+SLOW = ("frame", "startup", "output", "effects", "features", "cloth", "wedge", "api")
 
 
 def check_rows(rows, sections):
@@ -58,3 +61,5 @@ def test_quick_bench_slow_sections():
     feats = {r.name: r.extra["kernels"] for r in rows if r.section.startswith("features")}
     # a scene without optional features compiles no more kernels than the full one
     assert len(feats["none of them"]) <= len(feats["all features"])
+    share = [r.extra["checks_share"] for r in rows if "checks_share" in r.extra]
+    assert len(share) == 1 and 0 < share[0] < 1

@@ -63,7 +63,7 @@ class ParticleIntegrator:
     """The compiled parts of a scene's particle step and what the step reports.
 
     ``collide``: the colliders' reporting function (``make_func(report=True)``; None: no
-    colliders). With ``contacts`` > 0 up to that many contacts per advance are recorded in
+    colliders). With ``contacts`` > 0 up to that many contacts between drains are recorded in
     ``contact_*`` fields (slot, collider, position, normal, impact speed, time); without, the
     unused report outputs are dead code the compiler drops. With ``events`` each step records in
     ``particle_event`` who died (bit 1) or hit a collider (bit 2, |Δv| in ``particle_impact``)

@@ -30,23 +30,28 @@ def pin_drive(model: ti.template(), state: ti.template(), alpha: ti.f64, h: ti.f
 
 @ti.func
 def no_collision(x, v):
-    """``collide`` for a network without colliders (the compiler drops the dead branch)."""
-    return x, v, 0, 0
+    """``collide`` for a network without colliders (the compiler drops the dead branch); the
+    colliders' reporting signature (x, v, killed, hits, which, normal, speed)."""
+    return x, v, 0, 0, -1, ti.Vector([0.0, 0.0, 0.0]), 0.0
 
 
 @ti.kernel
 def finalize(model: ti.template(), state: ti.template(), collide: ti.template(), bad_t: ti.template(),
-             alpha: ti.f64, t_end: ti.f64):
+             alpha: ti.f64, t_end: ti.f64, contacts: ti.template()):
+    """``contacts``: an :class:`engine.contacts.ContactBuffer` (recording compiled in only when
+    it is enabled; the unused report outputs of ``collide`` are then dead code)."""
     X, V = ti.static(state.node_pos, state.node_vel)
     for i in range(model.node_count):
         x, v = X[i], V[i]
         if model.node_pinned[i]:
             x = pin_at(model, i, ti.cast(alpha, model.dtype))
         else:
-            xc, vc, killed, hits = collide(ti.cast(x, ti.f32), ti.cast(v, ti.f32))
+            xc, vc, killed, hits, which, nrm, spd = collide(ti.cast(x, ti.f32), ti.cast(v, ti.f32))
             if hits > 0:
                 x = ti.cast(xc, model.dtype)
                 v = ti.cast(vc, model.dtype)
+                if ti.static(contacts.enabled):
+                    contacts.record(i, which, xc, nrm, spd, t_end)
         if not is_finite(x.sum() + v.sum()):
             ti.atomic_min(bad_t[None], t_end)
         X[i] = x

@@ -7,7 +7,9 @@ RK45 at equal error), ``startup`` (cold and warm ``particles run``), ``features`
 optional feature and proof that an unused one compiles nothing), ``cloth`` (when
 ``engine.springs`` exists), ``output`` (``particles run``'s frame rate against sim + render),
 ``wedge`` (``particles wedge`` on local Dask workers against the same variants run one after
-another). ``quick`` uses small sizes so CI can run it in seconds.
+another), ``api`` (the game API's level restart, memory over build/discard cycles, add_emitter, a
+new render size, the cost of its argument checks). ``quick`` uses small sizes so CI can run it in
+seconds.
 """
 from __future__ import annotations
 
@@ -17,10 +19,11 @@ import time
 
 from .common import Row, format_table
 
-SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output", "wedge")
+SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output", "wedge",
+            "api")
 _MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy",
             "startup": "startup", "features": "features", "cloth": "cloth", "output": "output",
-            "wedge": "wedge"}
+            "wedge": "wedge", "api": "api"}
 
 
 def run(quick: bool = False, only=None, echo=None, quiet: bool = True):
