@@ -168,8 +168,10 @@ class FrameWriter:
 
     def _write_png(self, index, img):
         try:
-            if self._error is not None:
-                return  # a frame failed: the run is ending, write nothing after it
+            failed_at = self._failed_at
+            if failed_at is not None and index > failed_at:
+                return  # a frame failed: the run is ending, write nothing after it (frames before
+                # it still are, so the folder ends whole at the failed frame whatever the order)
             data = encode_png(img, self.compress_level)
             with replacing(frame_path(self.out_dir, index)) as tmp:
                 _write_bytes(tmp, data)
