@@ -21,3 +21,12 @@ def scene_dict(**changes):
             node = node.setdefault(p, {})
         node[parts[-1]] = value
     return d
+
+
+def quick(values, keep):
+    """Parametrize values where only those in ``keep`` run by default and the rest under
+    ``-m slow`` (CI runs both): the default suite stays within its time budget while every case
+    still runs in CI."""
+    import pytest
+
+    return [v if v in keep else pytest.param(v, marks=pytest.mark.slow) for v in values]

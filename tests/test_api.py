@@ -117,6 +117,7 @@ def test_read_back_matches_rendered_positions():
     assert np.all(lum[~mask] < background + 30)  # nothing bright anywhere else
 
 
+@pytest.mark.slow
 def test_independent_scenes_in_one_process_and_rebuilds_keep_particles():
     a, b = cloud(), cloud()
     for _ in range(5):

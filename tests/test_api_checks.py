@@ -143,6 +143,7 @@ def test_step_never_runs_unbounded():
         ParticleScene({"emitters": [{"rate": 1.0}]}, max_dt=0.0)
 
 
+@pytest.mark.slow
 def test_scenes_of_any_mix_answer_every_method():
     cloth_only = (SceneBuilder(fps=60).render(width=32, height=32)
                   .body(type="cloth", name="c", resolution=[3, 3], integrator="xpbd").build(contacts=True))

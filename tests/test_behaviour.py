@@ -10,6 +10,7 @@ import os
 import numpy as np
 import pytest
 
+from helpers import quick
 from behaviour_scenes import FRAME_SHOTS, adaptive_cloth, adaptive_particles, fixed_cloths, particle_frames
 
 HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "behaviour")
@@ -29,13 +30,14 @@ def assert_same_particles(got, want):
         np.testing.assert_allclose(got[key], want[key], err_msg=key, **TOL)
 
 
-@pytest.mark.parametrize("name", sorted(FRAME_SHOTS))
+@pytest.mark.parametrize("name", quick(sorted(FRAME_SHOTS), keep={"sparks", "sub_emitters"}))
 def test_particle_frames_kept(name):
     want = fixture(f"frames_{name}")
     assert len(want["slot"]) > 50
     assert_same_particles(particle_frames(name, FRAME_SHOTS[name]), want)
 
 
+@pytest.mark.slow
 def test_adaptive_particle_step_sizes_kept():
     want, got = fixture("h_particles"), adaptive_particles()
     assert want["rejected"] > 0 and want["per_frame"].max() > 4  # a sequence worth pinning
@@ -53,6 +55,7 @@ def test_adaptive_cloth_step_sizes_kept():
     np.testing.assert_allclose(got["pos"], want["pos"], **TOL)
 
 
+@pytest.mark.slow
 def test_fixed_step_cloths_kept():
     want, got = fixture("cloth_fixed"), fixed_cloths()
     assert sorted(got) == sorted(want)

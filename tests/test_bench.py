@@ -43,6 +43,7 @@ def check_rows(rows, sections):
     return names
 
 
+@pytest.mark.slow
 def test_quick_bench_has_every_row_with_finite_positive_figures():
     fast = [s for s in bench.SECTIONS if s not in SLOW]
     rows = bench.run(quick=True, only=fast)

@@ -8,6 +8,7 @@ import pytest
 from PIL import Image
 
 from runhelp import call
+from helpers import quick
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ENV = dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=ROOT)
@@ -35,7 +36,7 @@ def load(path):
     return np.asarray(Image.open(path).convert("RGB"))
 
 
-@pytest.mark.parametrize("config", ["sparks", "dust"])
+@pytest.mark.parametrize("config", quick(["sparks", "dust"], keep={"sparks"}))
 def test_run_renders_non_blank_frames(tmp_path, config):
     out = tmp_path / config
     r = particles("run", f"configs/{config}.toml", "--frames", "12", "--out", str(out), "--quiet",
@@ -63,6 +64,7 @@ def test_same_config_and_seed_give_byte_identical_pngs(tmp_path):
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
 
 
+@pytest.mark.slow
 def test_refuses_to_overwrite_without_flag(tmp_path):
     out = tmp_path / "o"
     assert particles("run", "configs/dust.toml", "--frames", "1", "--out", str(out), "--quiet",
@@ -109,6 +111,7 @@ def test_validate_and_list_shipped_configs():
     assert r.returncode == 0 and "sparks.toml" in r.stdout and "dust" in r.stdout
 
 
+@pytest.mark.slow
 def test_mp4_output(tmp_path):
     out = tmp_path / "m"
     r = particles("run", "configs/dust.toml", "--frames", "8", "--out", str(out), "--format", "mp4",
@@ -132,7 +135,8 @@ def test_gif_output_is_whole(tmp_path):
     assert Image.open(out / "sparks.gif").n_frames == 6
 
 
-@pytest.mark.parametrize("integrator", ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"])
+@pytest.mark.parametrize("integrator", quick(["euler", "midpoint", "rk4", "symplectic_euler", "verlet"],
+                                               keep={"rk4"}))
 def test_divergence_exits_3_naming_integrator_h_and_time(tmp_path, integrator):
     # drag k = 2000 1/s at h = 1/30 s: hk ≈ 67, far outside every explicit method's stability region
     cfg = tmp_path / "stiff.toml"

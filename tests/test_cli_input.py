@@ -132,6 +132,7 @@ def test_budgets_refuse_before_any_work(tmp_path, body, flags, limit):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_raising_the_limit_lets_the_run_go(tmp_path):
     path = cfg_file(tmp_path, body=TINY.format(extra="").replace("[render]", "[solver]\nh = 1e-3\n[render]"))
     code, _, err = call("run", path, "--out", tmp_path / "a", "--quiet", "--max-steps", "40")
@@ -147,6 +148,7 @@ def test_duration_times_fps_cannot_pass_the_frame_cap(tmp_path):
     assert code == 2 and "duration: 3600 s at fps 1000 is 3,600,000 frames; at most 1,000,000" in out
 
 
+@pytest.mark.slow
 def test_resume_with_nothing_left_says_so_and_simulates_nothing(tmp_path):
     path = cfg_file(tmp_path)
     out = tmp_path / "out"
@@ -185,6 +187,7 @@ def test_list_of_a_missing_folder_and_a_closed_pipe(tmp_path):
     assert proc.wait(timeout=60) in (0, 141) and err == "", err
 
 
+@pytest.mark.slow
 def test_arch_that_cannot_start_is_an_error_and_auto_records_what_ran(tmp_path):
     import taichi as ti
 

@@ -11,7 +11,7 @@ from engine.particles.curves import Curves
 from engine.particles.noise import curl_noise
 from engine.particles.pool import PARTICLE_FIELDS
 from engine.scene import Scene
-from helpers import scene_dict
+from helpers import quick, scene_dict
 
 GOLDEN = os.path.join(os.path.dirname(__file__), "golden")
 
@@ -41,6 +41,7 @@ def test_ramps_hit_their_stops_and_interpolate_between():
     np.testing.assert_allclose(o[6:], [[2.0, 2.0, 2.0]] * 3, atol=1e-6)  # one stop: constant
 
 
+@pytest.mark.slow
 def test_curl_noise_is_divergence_free():
     n = 2000
     rng = np.random.default_rng(0)
@@ -101,6 +102,7 @@ def _render_with_pool_order(d, perm=None):
     return s.render()[..., :3].astype(float)
 
 
+@pytest.mark.slow
 def test_alpha_blending_does_not_depend_on_particle_order():
     d = scene_dict(frames=1, render={"width": 160, "height": 90},
                    camera={"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
@@ -153,7 +155,7 @@ def render_small(name, frames):
     return s.render()[..., :3]
 
 
-@pytest.mark.parametrize("name", sorted(GOLDEN_SHOTS))
+@pytest.mark.parametrize("name", quick(sorted(GOLDEN_SHOTS), keep={"sparks", "campfire"}))
 def test_golden_image(name):
     """A tiny render of each effect against a stored one, so a change to the look is seen.
     Regenerate after an intended change: python tests/make_golden.py"""

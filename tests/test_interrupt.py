@@ -83,6 +83,7 @@ def test_sigint_stops_cleanly_and_resume_matches(setup, tmp_path):
     resume_and_compare(cfg, out, ref, n)
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_only_whole_frames_and_resume_matches(setup, tmp_path):
     cfg, ref = setup
     out = tmp_path / "out"
@@ -94,6 +95,7 @@ def test_sigkill_leaves_only_whole_frames_and_resume_matches(setup, tmp_path):
     resume_and_compare(cfg, out, ref, n)
 
 
+@pytest.mark.slow
 def test_resume_cleans_temporaries_and_drops_a_gap(setup, tmp_path):
     cfg, ref = setup
     out = tmp_path / "out"
@@ -110,6 +112,7 @@ def test_resume_cleans_temporaries_and_drops_a_gap(setup, tmp_path):
     assert not (out / ".frame_00012.png.tmp").exists()
 
 
+@pytest.mark.slow
 def test_resume_refuses_other_settings(setup, tmp_path):
     cfg, _ = setup
     out = tmp_path / "out"

@@ -176,6 +176,7 @@ def test_adaptive_scene_lands_on_frames_and_matches_fine_fixed_step():
     assert np.abs(a.positions() - f.positions()).max() < 1e-4
 
 
+@pytest.mark.slow
 def test_same_seed_gives_identical_frames_and_different_seed_does_not():
     d = scene_dict(frames=1, forces={"gravity": [0.0, -9.81, 0.0]},
                    render={"width": 96, "height": 54},

@@ -30,8 +30,9 @@ def _other_schedule(s, schedule):
                     bodies=s.bodies, schedule=schedule)
 
 
-@pytest.mark.parametrize("path, res", [("configs/sparks.toml", 1), ("configs/dust.toml", 0.5),
-                                       ("configs/campfire.toml", 0.25)])
+@pytest.mark.parametrize("path, res", [("configs/sparks.toml", 1),
+                                       pytest.param("configs/dust.toml", 0.5, marks=pytest.mark.slow),
+                                       pytest.param("configs/campfire.toml", 0.25, marks=pytest.mark.slow)])
 def test_per_pixel_schedule_draws_the_per_tile_image(path, res):
     """The GPU's schedule (a thread per pixel, registers) and the CPU's (a thread per tile,
     sprite-major) add the same sprites to each pixel in the same order: the same image but for
@@ -61,6 +62,7 @@ print(h.hexdigest())
 """
 
 
+@pytest.mark.slow
 def test_frames_are_byte_identical_across_thread_counts():
     env = dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=ROOT)
     out = [subprocess.run([sys.executable, "-c", _PROBE, str(n)], cwd=ROOT, env=env, text=True,
@@ -118,6 +120,7 @@ def test_pair_list_grows_without_changing_the_image():
     assert t.pair_capacity >= s.renderer.last_pairs > 16
 
 
+@pytest.mark.slow
 def test_reduced_layer_stays_close_to_full_resolution():
     """Smoke drawn into the ¼-resolution layer and upsampled looks like smoke drawn at full
     resolution: small differences, spread thin, no shift in overall brightness."""

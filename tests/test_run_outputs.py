@@ -30,6 +30,7 @@ def write_cfg(folder, name="fx", extra="", rate=400.0, emitter=""):
     return path
 
 
+@pytest.mark.slow
 def test_config_output_folder_lands_under_renders(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     cfg = write_cfg(tmp_path, extra='output = "shots/my_sparks"')
@@ -52,6 +53,7 @@ def test_config_output_cannot_leave_renders(tmp_path, monkeypatch, value):
     assert not (tmp_path / "renders").exists()
 
 
+@pytest.mark.slow
 def test_config_output_through_a_symlink_is_refused_but_out_may_go_anywhere(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "renders").mkdir()

@@ -119,6 +119,7 @@ def _energy_series(integrator, h, n_steps, every=10):
     return np.array(e)
 
 
+@pytest.mark.slow
 def test_symplectic_energy_bounded_while_euler_grows(tmp_path):
     h = 0.01  # hω = 0.1, well below symplectic Euler's limit of 2
     se = _energy_series("symplectic_euler", h, 10_000, every=50)
@@ -139,6 +140,7 @@ def _stiff_cloth():
     return cloth(16, 16, size=(0.5, 0.5), plane="xy", mass=0.01, ks=1e4, kd=0.01, pin="corners")
 
 
+@pytest.mark.slow
 def test_guard_refuses_stiff_cloth_and_forced_run_diverges():
     with pytest.raises(StiffnessError, match=r"symplectic_euler needs h < .* s for ω_max = \d+ rad/s .*"
                                              r"got h = 0.0167: use substeps >= \d+ or solver 'xpbd'"):
@@ -191,6 +193,7 @@ def test_cloth_drapes_over_sphere_without_penetration(integrator):
     assert np.all(x[corners, 1] < centre[1] + R - 0.15)  # the edges hang down
 
 
+@pytest.mark.slow
 def test_moving_pin_and_stretch_limit_and_determinism():
     def run():
         top = chain(8, start=(0, 1, 0), length=1.0, mass=0.02, ks=20.0, kd=0.01)  # soft: gravity stretches it
@@ -207,6 +210,7 @@ def test_moving_pin_and_stretch_limit_and_determinism():
 
 
 # -- step doubling ----------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_adaptive_lands_on_frames_and_matches_fine_rk4():
     def small_chain():
         return chain(5, start=(0, 0, 0), end=(0.8, -0.2, 0), mass=0.05, ks=30.0, kd=0.05)

@@ -32,6 +32,7 @@ def xdisplay():
     proc.wait(timeout=10)
 
 
+@pytest.mark.slow
 def test_viewer_shows_frames_in_a_window(tmp_path, xdisplay):
     shot = tmp_path / "shot.png"
     env = dict(ENV, DISPLAY=xdisplay)

@@ -70,6 +70,7 @@ def cluster():
     c.close()
 
 
+@pytest.mark.slow
 def test_wedge_renders_variants_index_sheet_and_records_a_diverging_one(tmp_path):
     # explicit drag k = 1e6 1/s at h = 1/30 s multiplies speeds by ~3e4 a step: non-finite by frame 9
     cfg = write_cfg(tmp_path, frames=12)
@@ -114,6 +115,7 @@ def test_wedge_renders_variants_index_sheet_and_records_a_diverging_one(tmp_path
         assert same_bytes(out / "v002", tmp_path / folder) == 12
 
 
+@pytest.mark.slow
 def test_resume_skips_finished_variants_and_finishes_a_partial_one(tmp_path, cluster):
     cfg = write_cfg(tmp_path)
     out = tmp_path / "w"
