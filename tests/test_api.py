@@ -95,6 +95,7 @@ def test_contacts_report_colliders_normals_and_speeds():
     assert seen[0] > 100 and seen[1] > 100
 
 
+@pytest.mark.slow
 def test_read_back_matches_rendered_positions():
     s = (SceneBuilder(seed=3, fps=30).forces(gravity=[0.0, 0.0, 0.0])
          .render(width=160, height=90, grid=False)

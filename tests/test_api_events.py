@@ -166,6 +166,7 @@ def test_particle_budget_shrinks_new_scenes_and_refuses_when_none_is_left():
         set_particle_budget(None)
 
 
+@pytest.mark.slow
 def test_a_new_render_size_and_a_warmed_up_scene_compile_nothing():
     s = (SceneBuilder(fps=60).render(width=64, height=36)
          .emitter(name="e", effect="sparks", rate=200.0)

@@ -126,6 +126,7 @@ def test_mp4_output(tmp_path):
     assert meta["size"] == (96, 54) and len(frames) == 8
 
 
+@pytest.mark.slow
 def test_gif_output_is_whole(tmp_path):
     out = tmp_path / "g"
     r = particles("run", "configs/sparks.toml", "--frames", "6", "--out", str(out), "--format", "gif",

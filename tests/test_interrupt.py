@@ -68,6 +68,7 @@ def resume_and_compare(cfg, out, ref, n_before):
     assert same_bytes(out, ref) == FRAMES
 
 
+@pytest.mark.slow
 def test_sigint_stops_cleanly_and_resume_matches(setup, tmp_path):
     cfg, ref = setup
     out = tmp_path / "out"
