@@ -128,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="small sizes (CI: well under a minute)")
     b.add_argument("--only", default=None,
                    help="comma-separated sections: step, frame, effects, ode, startup, features, "
-                        "cloth, output, wedge")
+                        "cloth, output, wedge, api")
     b.add_argument("--quiet", action="store_true", help="no progress display")
     b.set_defaults(func=_cmd_bench)
 
