@@ -64,3 +64,17 @@ def test_viewer_says_clearly_when_there_is_no_display():
     r = subprocess.run([sys.executable, "-m", "engine", "view", "configs/sparks.toml"], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "no display" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_viewer_refuses_a_bad_config_in_one_line_before_a_window_opens(tmp_path):
+    # a config the loader accepts key by key but no scene can be built from (a silent emitter),
+    # and a file that is not there: exit 2, one line naming the file and the key, no traceback
+    cfg = tmp_path / "silent.toml"
+    cfg.write_text(open(os.path.join(ROOT, "configs", "sparks.toml")).read().replace(
+        "rate = 1800.0", "rate = 0.0"))
+    for path, needle in ((cfg, "emitters[0].rate"), (tmp_path / "missing.toml", "not found")):
+        r = subprocess.run([sys.executable, "-m", "engine", "view", str(path)], cwd=ROOT, env=ENV,
+                           capture_output=True, text=True, timeout=120)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert str(path) in lines[0] and needle in lines[0] and "Traceback" not in r.stderr

@@ -135,13 +135,19 @@ def cmd_view(args) -> int:
     from ..api import ParticleScene
     from ..config import ConfigError
 
+    from .commands import load_scene_config
+
+    # the same checks and messages as `particles run` (one line per problem, naming the file and
+    # the key) before a window opens or a kernel compiles
+    load_scene_config(args.config, None)
+
     def make():
         try:
             return ParticleScene.from_file(args.config)
-        except ConfigError as e:
-            raise UserError(f"{args.config}: " + "; ".join(e.problems)) from None
+        except (ConfigError, ValueError) as e:  # the API's own checks: one line, no traceback
+            raise UserError(f"{args.config}: {e}") from None
 
-    make()  # a bad config fails before a window opens
+    make()  # a scene that cannot be built fails before a window opens
     r = run_viewer(make, f"particles: {args.config}", frames=args.frames, screenshot=args.screenshot)
     steady = f" ({r['fps_steady']:.1f} frames/s after the first {WARM_FRAMES})" if r["fps_steady"] else ""
     print(f"{r['frames']} frames in {r['seconds']:.2f} s: {r['fps']:.1f} frames/s{steady}")
