@@ -9,7 +9,7 @@ import pytest
 
 from engine.api import ParticleScene
 from engine.config import load_config
-from engine.render.renderer import Renderer
+from engine.render.renderer import MAX_SIZES_KEPT, Renderer
 from engine.render.resolution import particle_scale
 from engine.scene import Scene
 
@@ -94,6 +94,13 @@ def test_new_sizes_cameras_and_overlays_compile_nothing():
     moved = s.camera.__class__((0.3, 1.8, 5.0), s.camera.look_at, s.camera.fov)
     s.render(camera=moved)
     assert _compiled(r) == before
+    # buffers of the least recently used sizes are dropped, and a dropped size comes back with the
+    # same image and no compile
+    first = s.render(200, 100)
+    for w, h in ((96, 54), (112, 63), (144, 81), (160, 90)):
+        s.render(w, h)
+    assert len(r._targets) <= MAX_SIZES_KEPT and (200, 100) not in {k[:2] for k in r._targets}
+    assert np.array_equal(s.render(200, 100), first) and _compiled(r) == before
 
 
 def test_background_is_redrawn_when_camera_or_colliders_move():

@@ -16,6 +16,8 @@ byte-identical run to run and for any CPU thread count: no float is summed by tw
 """
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 import taichi as ti
 
@@ -27,6 +29,7 @@ from .sprites import Look, SpriteRecords, build_sprite_kernel
 from .targets import FrameTargets, packed_view
 
 SCHEDULES = ("tiles", "pixels")
+MAX_SIZES_KEPT = 4  # image sizes whose buffers a Renderer keeps (least recently used dropped)
 RESOLUTIONS = {"auto": None, "1": 1.0, "0.5": 0.5, "0.25": 0.25}
 def _arch_is_cpu() -> bool:
     from taichi.lang import impl
@@ -65,7 +68,7 @@ class Renderer:
             from .mesh import MeshLayer
 
             self.mesh = MeshLayer(bodies)
-        self._targets = {}
+        self._targets = OrderedDict()  # (W, H, layer scale) -> FrameTargets, most recent last
         self.last_pairs = 0
 
     # -- per-size arrays ------------------------------------------------------------------------
@@ -79,6 +82,13 @@ class Renderer:
             t = FrameTargets(W, H, key[2], self.chunks, alpha=self.uses_alpha, mesh=self.mesh is not None,
                              pairs=max(1 << 14, int(1.5 * cap)))
             self._targets[key] = t
+            # keep the buffers of the last few sizes only (a window being resized would otherwise
+            # hold one set per size it passed through); a size dropped here costs an allocation,
+            # never a compile, when it comes back
+            while len(self._targets) > MAX_SIZES_KEPT:
+                self._targets.popitem(last=False)
+        else:
+            self._targets.move_to_end(key)
         return t
 
     def _background_key(self, cam, show):
