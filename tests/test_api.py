@@ -16,6 +16,7 @@ def cloud(**extra):
     return b.build(**extra)
 
 
+@pytest.mark.slow
 def test_moving_sphere_pushes_particles_and_none_end_inside():
     s = cloud(contacts=True)
     s.step(1 / 60)

@@ -9,7 +9,6 @@ import taichi as ti
 from engine.config import load_config
 from engine.scene import Scene
 from engine.tools import budget
-from helpers import quick
 
 _BYTES = {ti.f32: 4, ti.i32: 4, ti.u32: 4, ti.u8: 1, ti.i8: 1, ti.f64: 8, ti.i64: 8, ti.u64: 8,
           ti.f16: 2, ti.i16: 2, ti.u16: 2}
@@ -42,7 +41,8 @@ def field_bytes(root) -> int:
     return total
 
 
-@pytest.mark.parametrize("case", quick(["particles", "cloth"], keep={"particles"}))
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["particles", "cloth"])
 def test_memory_estimate_matches_the_fields_a_scene_allocates(case):
     if case == "particles":  # ~60k slots, sub-emitter events and adaptive candidates allocated
         cfg = load_config({

@@ -188,6 +188,7 @@ def test_progress_on_a_terminal_and_sigterm_mid_frame(tmp_path):
     assert sorted(os.listdir(out)) == [".particles-run.json"]
 
 
+@pytest.mark.slow
 def test_quiet_or_not_a_terminal_draws_no_progress(tmp_path):
     cfg = tmp_path / "q.toml"
     cfg.write_text(CONFIG.replace("frames = 60", "frames = 2"))

@@ -118,6 +118,7 @@ def test_background_is_redrawn_when_camera_or_colliders_move():
     assert np.array_equal(cached, s.render())  # the move had been noticed
 
 
+@pytest.mark.slow
 def test_pair_list_grows_without_changing_the_image():
     s = _scene("configs/sparks.toml", frames=15)
     ref = s.render()
@@ -165,6 +166,7 @@ def test_transparent_overlay_is_premultiplied_with_alpha_zero_where_nothing_is_d
     assert lit.any() and (over[lit, 3] < 255).any()  # additive light adds (alpha below 1)
 
 
+@pytest.mark.slow
 def test_render_into_a_given_array_and_refuse_a_wrong_one():
     s = _scene("configs/sparks.toml", frames=5, size=(96, 54))
     out = np.zeros((54, 96, 4), np.uint8)

@@ -110,6 +110,7 @@ def test_disk_full_mid_run_exits_4_and_leaves_no_partial_frame(tmp_path, monkeyp
     assert [f for f in os.listdir(out) if f.startswith(".")] == [".particles-run.json"]
 
 
+@pytest.mark.slow
 def test_emitter_over_capacity_keeps_running_and_reports_drops(tmp_path):
     # 1,200 particles/s living 5 s into 40 slots: 6 frames want 240 particles; 200 do not fit
     cfg = write_cfg(tmp_path, rate=1200.0, emitter="lifetime = 5.0\nlifetime_randomness = 0.0\ncapacity = 40")
