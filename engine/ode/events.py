@@ -1,0 +1,243 @@
+"""Event location inside a step: impacts found in time, for any of the core's steppers.
+
+scipy's ``solve_ivp(events=...)`` finds where an event function changes sign within a step on the
+step's dense output and stops there; here the element goes on: it is advanced to the event,
+an *event set* responds (a collider reflects its velocity), and the step is finished from there
+(NUMERICS.md, "Collisions"). :func:`located_step` wraps a stepper once, generically, and every
+system uses it for its elements: each particle in the fused step kernels, each spring node after
+its network's step, and :func:`engine.ode.solve`'s small state. Elements are located each on their
+own: a pool's step is not cut once per contact.
+
+The element's state is second order, y = (q, p) with q' = p (particles: (x, age | v, 0); spring
+nodes (x, a | v, 0); solve's (x | v) with 3-D x), and events are functions of the point
+x = q[0:3] moving at v = p[0:3]. Within one step from t to t + h:
+
+1. take the step (or the rest of it) from y_a at t + s to y_b at t + h;
+2. for each event function k with g_k(y_a) > 0 > g_k(y_b) (a crossing into the surface), find the
+   root τ_k (a point that starts touching the surface, |g| within rounding, is looked for only
+   when it moves away — a bounce that lands again within the step, bracketed from the top of its
+   hop; one that stays is *held* by the event set's projection at the step's end, not located
+   again: resting contact never stalls the stepper):
+   closed form under constant acceleration where g is linear in x (a plane: the quadratic
+   g₀ + ġ₀τ + ½ g̈τ² = 0 with g̈ = N·Δv/Δt), otherwise safeguarded Newton (bisection when a Newton
+   step leaves the bracket) on the step's dense output, the cubic Hermite through (x, v) at both
+   ends (O(h⁴) accurate), stopping when |g| ≤ ``tol_g`` or τ stops moving;
+3. at the earliest root: advance to it with the stepper itself (so the state there has the
+   method's own accuracy and error estimate), respond (the event set projects the point onto the
+   surface and reflects its velocity), and go back to 1 for the rest of the step, at most
+   :data:`MAX_EVENTS` times (a bouncing ball's Zeno tail falls to the projection).
+
+The error the driver sees for a located step is the largest scaled error of its pieces, and the
+distance the located point was off the surface (the dense output's error) beyond rounding, scaled
+the same way: a step whose impact the Hermite cannot place within the tolerance is rejected and
+retried shorter, so the tolerance bounds the bounce as it bounds the flight.
+
+An event set (duck-typed; :class:`engine.colliders.Colliders` is one) has ``count`` and ``dtype``,
+``linear(k)`` and ``stops(k)`` (compile-time answers), ``contact(k, x, xd, lag) -> (g, ġ, N)``
+(``lag``: seconds before the step's end: a moving surface is placed where it is then) and
+``respond(k, x, v, lag, dv) -> (x', v', speed, N)``.
+"""
+import taichi as ti  # (no __future__ annotations: Taichi reads the funcs' annotations)
+
+from .steppers import is_finite, scaled_error
+
+MAX_EVENTS = 4  # located impacts per element per step
+NEWTON_ITERATIONS = 8  # per root; from the secant start a plane or a sphere needs 2–4
+EPS_BAND = 16  # |g| within EPS_BAND × machine epsilon × (1 + |x|) of the surface: touching (rounding)
+
+
+def _eps(dtype) -> float:
+    return 2.0 ** -52 if dtype == ti.f64 else 2.0 ** -23
+
+
+def contact_band(dtype):
+    """``band(x)``: how close to a surface a point at x counts as touching it, m: EPS_BAND units
+    of rounding of the point's coordinates (a point put on a surface lands within it)."""
+    eps = _eps(dtype)
+
+    @ti.func
+    def band(x):
+        return EPS_BAND * eps * (1.0 + x.norm())
+
+    return band
+
+
+@ti.func
+def hermite(x0, v0, x1, v1, h, s):
+    """The cubic Hermite through (x0, v0) at 0 and (x1, v1) at h: its value and derivative at
+    s ∈ [0, h] (Hairer, Nørsett & Wanner I, §II.6: error O(h⁴) for a smooth path)."""
+    u = s / h
+    w = 1.0 - u
+    x = (1.0 + 2.0 * u) * w * w * x0 + u * w * w * h * v0 + u * u * (3.0 - 2.0 * u) * x1 - u * u * w * h * v1
+    xd = 6.0 * u * w * (x1 - x0) / h + w * (1.0 - 3.0 * u) * v0 + u * (3.0 * u - 2.0) * v1
+    return x, xd
+
+
+def point_velocity(n: int):
+    """Accessors of a second-order state of length n (q = y[:n/2], p = y[n/2:]): ``point(y)``,
+    ``velocity(y)`` (3-vectors) and ``placed(y, x, v)`` (y with them replaced)."""
+    if n % 2 or n < 6:
+        raise ValueError(f"events need a second-order state (q, p) with 3-D points; got length {n}")
+    m = n // 2
+
+    @ti.func
+    def point(y):
+        return ti.Vector([y[0], y[1], y[2]])
+
+    @ti.func
+    def velocity(y):
+        return ti.Vector([y[m], y[m + 1], y[m + 2]])
+
+    @ti.func
+    def placed(y, x, v):
+        out = y
+        for c in ti.static(range(3)):
+            out[c] = x[c]
+            out[m + c] = v[c]
+        return out
+
+    return point, velocity, placed
+
+
+def located_step(step, events, n: int, dtype, quadratic: bool = False):
+    """``run(y, t, h, i, atol, rtol, tol_g) -> (y_end, err, count, k, lag, x, N, speed, dv, stopped)``:
+    one step of ``step`` with the events of ``events`` located in it (module docstring).
+
+    ``step(y, t, h, i, atol, rtol) -> (y_next, err)``: a step and its scaled error (0 for fixed
+    steps). ``quadratic``: the acceleration is constant over a step (gravity only), so a linear
+    contact's root is the closed form. Returns the state at t + h, the largest scaled error, how
+    many events were located, and the fastest impact of the step: event function ``k`` (−1: none), ``lag`` (s before the step's
+    end), the point ``x`` on the surface, the normal ``N``, the impact speed and the velocity change
+    |Δv|; ``stopped`` (1: an event function that ``stops`` was hit: y_end is the state at it)."""
+    point, velocity, placed = point_velocity(n)
+    eps = _eps(dtype)
+    band = contact_band(dtype)
+    n_fn = events.count  # event functions (compile time)
+
+    @ti.func
+    def root(k: ti.template(), xa, va, xb, vb, span, start, glo, gdlo, gb, N, tol_g):
+        """Offset in [start, span] of the crossing of contact k between (xa, va) at 0 and (xb, vb)
+        at span, bracketed by g(start) = glo > 0 (ġ there gdlo) and g(span) = gb < 0."""
+        lo = ti.cast(start, dtype)
+        tau = ti.cast(-1.0, dtype)
+        if ti.static(quadratic and events.linear(k)):
+            gdd = N.dot(vb - va) / span  # g̈ = N·a (the collider moves linearly)
+            disc = gdlo * gdlo - 2.0 * gdd * glo
+            if disc >= 0.0:
+                den = ti.sqrt(disc) - gdlo
+                if den > 0.0:
+                    tau = lo + 2.0 * glo / den  # the first root of g₀ + ġ₀τ + ½g̈τ² (no cancellation)
+        if not (tau >= lo and tau <= span):
+            hi = span
+            tau = lo + (span - lo) * glo / (glo - gb)  # secant start inside the bracket
+            it = 0
+            while it < NEWTON_ITERATIONS:
+                x, xd = hermite(xa, va, xb, vb, span, tau)
+                g, gd, _N = events.contact(k, x, xd, span - tau)
+                it += 1
+                if g > 0.0:
+                    lo = tau
+                else:
+                    hi = tau
+                nxt = 0.5 * (lo + hi)
+                if gd != 0.0:
+                    newton = tau - g / gd
+                    if newton > lo and newton < hi:
+                        nxt = newton
+                    if ti.abs(g / gd) <= 4.0 * eps * span:
+                        nxt = tau  # Newton's step is below rounding: converged
+                if ti.abs(g) <= tol_g or ti.abs(nxt - tau) <= 4.0 * eps * span:
+                    it = NEWTON_ITERATIONS  # converged, or τ stopped moving
+                tau = nxt
+        return tau
+
+    @ti.func
+    def crossing(k: ti.template(), xa, va, xb, vb, span, tol_g):
+        """Offset of the first crossing of contact k into its surface within [0, span], or −1.
+        A point touching the surface at the start (within the rounding band) is held when it
+        does not move away; moving away, it is looked for again where ġ's secant vanishes (the
+        top of its hop): a bounce that lands again within the step."""
+        tau = ti.cast(-1.0, dtype)
+        ga, gda, N = events.contact(k, xa, va, span)
+        gb, gdb, _Nb = events.contact(k, xb, vb, 0.0)
+        if gb < 0.0:
+            if ga > band(xa):
+                tau = root(k, xa, va, xb, vb, span, 0.0, ga, gda, gb, N, tol_g)
+            elif gda > 0.0 and gdb < 0.0:
+                top = span * gda / (gda - gdb)
+                x, xd = hermite(xa, va, xb, vb, span, top)
+                gt, gdt, _Nt = events.contact(k, x, xd, span - top)
+                if gt > band(x):
+                    tau = root(k, xa, va, xb, vb, span, top, gt, gdt, gb, N, tol_g)
+        return tau
+
+    @ti.func
+    def run(y, t, h, i, atol, rtol, tol_g):
+        zero = ti.Vector.zero(dtype, 3)
+        s = ti.cast(0.0, dtype)
+        ya = y
+        yb, err = step(ya, t, h, i, atol, rtol)
+        rec_k, rec_lag, rec_x, rec_n = -1, ti.cast(0.0, dtype), zero, zero
+        rec_speed, rec_dv = ti.cast(-1.0, dtype), ti.cast(0.0, dtype)
+        stopped, count, searching = 0, 0, 1
+        while searching != 0 and count < MAX_EVENTS:
+            xa, va, xb, vb = point(ya), velocity(ya), point(yb), velocity(yb)
+            span = h - s
+            first, best = -1, span
+            if span > 0.0 and is_finite(xb.sum() + vb.sum()):
+                for k in ti.static(range(n_fn)):
+                    tau = crossing(k, xa, va, xb, vb, span, tol_g)
+                    if tau >= 0.0 and (tau < best or first < 0):
+                        first, best = k, tau
+            if first < 0:
+                searching = 0
+            else:
+                count += 1
+                ye, err_e = step(ya, t + s, best, i, atol, rtol)  # advance to the event
+                err = ti.max(err, err_e)
+                xe, ve = point(ye), velocity(ye)
+                xr, vr = xe, ve
+                for k in ti.static(range(n_fn)):
+                    if k == first:
+                        miss, _gd, _N = events.contact(k, xe, ve, span - best)
+                        off = ti.max(ti.abs(miss) - band(xe), 0.0)
+                        err = ti.max(err, off / (atol + rtol * xe.norm()))
+                        xr, vr, speed, N = events.respond(k, xe, ve, span - best, zero)
+                        if speed > rec_speed:
+                            rec_k, rec_lag, rec_x, rec_n = k, span - best, xr, N
+                            rec_speed, rec_dv = speed, (vr - ve).norm()
+                        if ti.static(events.stops(k)):
+                            stopped = 1
+                ya = placed(ye, xr, vr)
+                s += best
+                if stopped != 0:
+                    yb = ya
+                    searching = 0
+                else:
+                    yb, err_b = step(ya, t + s, h - s, i, atol, rtol)  # finish the step from there
+                    err = ti.max(err, err_b)
+        return yb, err, count, rec_k, rec_lag, rec_x, rec_n, ti.max(rec_speed, 0.0), rec_dv, stopped
+
+    return run
+
+
+def fixed_error(step, dtype):
+    """A fixed stepper ``step(y, t, h, i)`` in :func:`located_step`'s form (its error is 0)."""
+
+    @ti.func
+    def stepped(y, t, h, i, atol, rtol):
+        return step(y, t, h, i), ti.cast(0.0, dtype)
+
+    return stepped
+
+
+def doubling_error(dstep):
+    """A step-doubling stepper ``dstep(y, t, h, i) -> (y2, est)`` in :func:`located_step`'s form:
+    its scaled max-norm error (:func:`~engine.ode.steppers.scaled_error`)."""
+
+    @ti.func
+    def stepped(y, t, h, i, atol, rtol):
+        y2, est = dstep(y, t, h, i)
+        return y2, scaled_error(y, y2, est, atol, rtol)
+
+    return stepped
