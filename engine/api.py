@@ -2,101 +2,131 @@
 
     from engine.api import ParticleScene, FixedTimestep
 
-    scene = ParticleScene.from_file("configs/campfire.toml", contacts=True)
+    scene = ParticleScene.from_file("configs/campfire.toml", contacts=True, interpolate=True)
     clock = FixedTimestep(1 / 120)
     while running:
         clock.advance(scene, frame_seconds)          # same simulation at 30 Hz or 144 Hz
         scene.move_collider("log", player_position)  # velocity inferred: it pushes particles
-        for hit in scene.contacts(min_speed=2.0).rows(): play_sound(hit)
-        image = scene.render(320, 180)               # (H, W, 4) uint8 RGBA to blit
+        for hit in scene.contacts(min_speed=2.0).rows(): play_sound(hit["name"])
+        image = scene.render(320, 180, transparent=True, alpha=clock.alpha)  # premultiplied RGBA
 
-Everything here writes the scene's :class:`~engine.control.Control` (this frame's inputs) or reads
-back; fields and kernels were built by :class:`~engine.scene.Scene`. Adding or removing emitters,
-colliders or bodies rebuilds the scene between frames (kernels are compiled for a fixed set of
-features) and carries live particles, emitter clocks, inputs and soft bodies over by name.
+Everything here checks its arguments first (:mod:`engine.checks`: ``TypeError``, ``ValueError``
+or ``KeyError`` in one line naming the argument and the value; a refused call changes nothing),
+then writes the scene's :class:`~engine.control.Control` (this frame's inputs) or reads back.
+Fields and kernels were built by :class:`~engine.scene.Scene`; a discarded scene (``close()`` or
+garbage) is kept for the next scene of the same config (:mod:`engine.reuse`), so a level restart
+compiles nothing. Adding or removing emitters, colliders or bodies rebuilds the scene between
+frames and carries live particles, emitter clocks, inputs and soft bodies over by name.
 """
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+import math
+import weakref
 
 import numpy as np
 
-from .config import load_config
+from . import checks, reuse
+from .budget import fit, hold, particle_budget, release, set_particle_budget
+from .builder import SceneBuilder
+from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
+from .particles.capacity import MAX_POOL
+from .clock import FixedTimestep
+from .config import ConfigError, load_config
+from .contacts import Contacts
 from .render.camera import Camera
 from .scene import Scene
 
+SPARE_EMITTERS = 4  # emitters add_emitter can write in place (rows beyond the config's)
+SPARE_SLOTS = 16_384  # pool slots for them (about 1.5 MB; dead slots cost a check per step)
 
-@dataclass
-class Contacts:
-    """Particle–collider contacts of the last ``step`` (sorted by time, then pool slot).
-
-    ``collider`` (K,) int index into the scene's colliders, ``position`` (K, 3) m, ``normal``
-    (K, 3) unit, ``speed`` (K,) impact speed along the normal m/s, ``time`` (K,) s."""
-
-    collider: np.ndarray
-    position: np.ndarray
-    normal: np.ndarray
-    speed: np.ndarray
-    time: np.ndarray
-    dropped: int = 0  # contacts beyond the buffer
-
-    def __len__(self):
-        return len(self.speed)
-
-    def rows(self):
-        for k in range(len(self)):
-            yield dict(collider=int(self.collider[k]), position=self.position[k],
-                       normal=self.normal[k], speed=float(self.speed[k]), time=float(self.time[k]))
+__all__ = ["ParticleScene", "SceneBuilder", "FixedTimestep", "Camera", "Contacts", "set_particle_budget",
+           "particle_budget"]
 
 
-class FixedTimestep:
-    """Fixed-timestep accumulator ("Fix Your Timestep!", Fiedler 2004): the game hands in real
-    frame times of any length, the simulation always advances in steps of ``dt``. ``alpha`` is the
-    fraction of a step left over, for interpolating what is drawn."""
+def _load(where: str, data: dict):
+    try:
+        return load_config(data)
+    except ConfigError as e:
+        raise ValueError(f"{where}: {'; '.join(e.problems)}") from None
 
-    def __init__(self, dt: float = 1 / 120, max_steps: int = 16):
-        if not dt > 0:
-            raise ValueError(f"dt: must be positive, got {dt}")
-        self.dt, self.max_steps = float(dt), int(max_steps)
-        self.accumulator = 0.0
-        self.alpha = 0.0
 
-    def advance(self, scene, frame_time: float) -> int:
-        """Run as many whole steps as the accumulated time allows (at most ``max_steps``, so a
-        stall does not spiral); returns how many ran."""
-        self.accumulator += max(0.0, float(frame_time))
-        n = 0
-        # a tolerance of 1e-9 s keeps 1/144 + ... sums that land on a step from losing one to rounding
-        while self.accumulator >= self.dt - 1e-9 and n < self.max_steps:
-            scene.step(self.dt)
-            self.accumulator -= self.dt
-            n += 1
-        if n == self.max_steps:
-            self.accumulator = min(self.accumulator, self.dt)
-        self.accumulator = max(self.accumulator, 0.0)
-        self.alpha = self.accumulator / self.dt
-        return n
+def _discard(key, scene, token, program) -> None:
+    """A ParticleScene went away: its slots return to the budget, its scene to the pool."""
+    release(token)
+    reuse.give_back(key, scene, program)
 
 
 class ParticleScene:
     """A scene driven from Python. Build with :meth:`from_file`, :meth:`from_dict` or
     :class:`SceneBuilder`. Several can live in one process; ``engine.runtime.init`` is called
-    once for all of them (or skipped when the host initialised Taichi itself)."""
+    once for all of them (or skipped when the host initialised Taichi itself).
 
-    def __init__(self, config, contacts: bool | int = False, render: bool = True):
-        self._data = copy.deepcopy(config) if isinstance(config, dict) else None
-        self.cfg = load_config(config) if not hasattr(config, "model_dump") else config
-        self._contacts = (65536 if contacts is True else int(contacts or 0))
-        self._render = render
-        self.scene = Scene(self.cfg, render=render, contacts=self._contacts)
-        self._last_contacts = None
+    ``contacts``: True (65,536) or the number of contact records kept between two
+    :meth:`contacts` calls; ``render``: build the renderer; ``interpolate``: keep last-step
+    positions for ``render(alpha=)``; ``max_dt``: the longest ``step(dt)`` allowed (s);
+    ``spare_emitters``, ``spare_slots``: room for emitters added by :meth:`add_emitter` without
+    compiling (parameter rows and pool slots beyond the config's)."""
+
+    def __init__(self, config, contacts: bool | int = False, render: bool = True, *,
+                 interpolate: bool = False, max_dt: float = MAX_DT, spare_emitters: int = SPARE_EMITTERS,
+                 spare_slots: int = SPARE_SLOTS):
+        where = type(self).__name__
+        self._spare = (integer(f"{where}: spare_emitters", spare_emitters, 0, 64),
+                       integer(f"{where}: spare_slots", spare_slots, 0, MAX_POOL))
+        self._contacts = (65536 if contacts is True else
+                          0 if contacts is False else integer(f"{where}: contacts", contacts, 0, MAX_CONTACTS))
+        self._render = boolean(f"{where}: render", render)
+        self._interpolate = boolean(f"{where}: interpolate", interpolate)
+        self.max_dt = number(f"{where}: max_dt", max_dt, 0.0, 60.0, lo_open=True)
+        if isinstance(config, dict):
+            data = checks.plain(copy.deepcopy(config))
+        elif hasattr(config, "model_dump"):
+            data = config.model_dump(exclude_none=True)
+        else:
+            raise TypeError(f"{where}: config: {checks.show(config)} is not a config dict or a validated config")
+        self._finalizer, self._token, self.scene = None, None, None
+        self.last_add = None  # why the last add_emitter rebuilt the scene (None: added in place)
+        self._install(data, where)
+
+    def _install(self, data: dict, where: str, previous=None) -> None:
+        """Validate ``data`` (under the particle budget) and make it this object's scene: an
+        idle one of the same key reset, else a new build (carrying ``previous`` over). Refused
+        (a bad config, the budget), nothing changes."""
+        cfg = _load(where, data)
+        release(self._token)  # this scene's own slots do not count against its rebuild
+        try:
+            data, cfg, self.budget_scale, spare = fit(data, cfg, lambda d: _load(where, d), self._spare)
+            opts = dict(render=self._render, contacts=self._contacts, interpolate=self._interpolate,
+                        spare=spare)
+            key = reuse.key_for(cfg, **opts)
+            scene = reuse.take(key) if previous is None else None
+            if scene is not None:
+                scene.reset()
+            else:
+                scene = Scene(cfg, previous=previous, **opts)
+                reuse.counts["built"] += 1
+                if previous is None:
+                    scene.reset()  # compiles the reset launches now, not at the first restart
+        except BaseException:
+            if previous is not None:
+                hold(self._token, previous.capacity)
+            raise
+        if self._finalizer is not None:
+            self._finalizer.detach()  # the scene it replaces was carried over: not reusable
+        self.scene, self.cfg, self._data, self._key = scene, cfg, data, key
+        self._token = object()
+        hold(self._token, scene.capacity)
+        self._finalizer = weakref.finalize(self, _discard, key, scene, self._token, reuse.program())
 
     @classmethod
     def from_file(cls, path, **kw) -> "ParticleScene":
         from .config import read_toml
 
-        data = read_toml(path)
+        try:
+            data = read_toml(path)
+        except ConfigError as e:
+            raise ValueError(f"from_file: {'; '.join(e.problems)}") from None
         data.setdefault("name", str(path).rsplit("/", 1)[-1].removesuffix(".toml"))
         return cls(data, **kw)
 
@@ -104,91 +134,161 @@ class ParticleScene:
     def from_dict(cls, data: dict, **kw) -> "ParticleScene":
         return cls(data, **kw)
 
+    @classmethod
+    def prepare(cls, config, copies: int = 1, sizes=(), **kw) -> None:
+        """Build ``copies`` scenes of ``config`` now, warmed up (:meth:`warm_up`), and keep them
+        idle: the next ``copies`` scenes of this config (and options) start without compiling.
+        For a loading screen; a path, a dict or a validated config."""
+        n = integer("prepare: copies", copies, 1, 64)
+        made = [cls.from_file(config, **kw) if isinstance(config, str) else cls(config, **kw) for _ in range(n)]
+        for s in made:
+            s.warm_up(sizes)
+        for s in made:
+            s.close()
+
+    def warm_up(self, sizes=()) -> None:
+        """Compile now what the game will call later — a step with a burst from every emitter and
+        moving colliders, read-backs, contact drains, a render at each (width, height) of
+        ``sizes`` — then return to t = 0 as built. Pays the compile cost on a loading screen."""
+        s = self._live("warm_up")
+        sizes = [checks.image_size("warm_up: sizes", w, h, (s.width, s.height)) for w, h in sizes]
+        s.warm_up(sizes)
+
+    def close(self) -> None:
+        """Discard the scene now: its fields and compiled kernels wait for the next scene of the
+        same config (engine.reuse), its slots go back to the particle budget."""
+        if self._finalizer is not None:
+            self._finalizer()
+        self.scene = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def _live(self, where: str) -> Scene:
+        if self.scene is None:
+            raise RuntimeError(f"{where}: this scene was closed")
+        return self.scene
+
     # -- time -------------------------------------------------------------------------------------
     @property
     def time(self) -> float:
-        return self.scene.t
+        return self._live("time").t
 
     def step(self, dt: float) -> None:
-        """Advance by dt seconds (any length), sub-stepping with the configured integrator."""
-        if not dt > 0:
-            raise ValueError(f"dt: must be positive, got {dt}")
-        self.scene.advance(dt)
-        self._last_contacts = None
+        """Advance by dt seconds (0 < dt <= max_dt), sub-stepping with the configured integrator."""
+        s = self._live("step")
+        number("step: dt", dt, 0.0, lo_open=True)
+        if dt > self.max_dt:
+            raise ValueError(f"step: dt: {dt!r} s is longer than max_dt = {self.max_dt:g} s: step in pieces "
+                             f"(FixedTimestep does) or build the scene with a larger max_dt")
+        sol = self.cfg.solver
+        if not sol.adaptive and s.particles is not None and dt / sol.h > MAX_STEPS_PER_CALL:
+            raise ValueError(f"step: dt: {dt!r} s is {math.ceil(dt / sol.h):,} steps of solver.h = {sol.h:g} s; "
+                             f"at most {MAX_STEPS_PER_CALL:,} per call")
+        if self._interpolate:
+            s.save_positions()
+        s.advance(float(dt))
 
     def live_count(self) -> int:
         """Live particles now (one read-back per step, only when asked)."""
-        return self.scene.live_count()
+        return self._live("live_count").live_count()
+
+    def dropped(self) -> int:
+        """Particles that found no free pool slot so far (a budget or a capacity too small)."""
+        return self._live("dropped").dropped()
 
     # -- control ----------------------------------------------------------------------------------
-    def _emitter(self, name) -> int:
+    def _emitter(self, where: str, name) -> int:
         names = [e.name for e in self.cfg.emitters]
-        if name not in names:
-            raise KeyError(f"emitter: no emitter named {name!r} (names: {names})")
-        return names.index(name)
+        return names.index(checks.name(f"{where}: name", name, names, "emitter"))
+
+    def _collider(self, where: str, name) -> int:
+        names = [c.name for c in self.cfg.colliders]
+        return names.index(checks.name(f"{where}: name", name, names, "collider"))
+
+    def _over(self, where: str, over, s: Scene) -> float:
+        return s.frame_dt if over is None else number(f"{where}: over", over, 0.0, self.max_dt, lo_open=True)
 
     def move_emitter(self, name: str, position, over: float | None = None) -> None:
         """Move emitter ``name`` to ``position`` by the end of the next step of length ``over``
         (default: one frame at the config's fps); its velocity is inferred from the motion."""
-        e = self._emitter(name)
-        self.scene.control.move_emitter(e, self.time, self.time + (over or self.scene.frame_dt), position)
+        s = self._live("move_emitter")
+        e, p = self._emitter("move_emitter", name), vector("move_emitter: position", position)
+        s.control.move_emitter(e, s.t, s.t + self._over("move_emitter", over, s), p)
 
     def set_rate(self, name: str, rate: float) -> None:
         """Particles per second (the pool keeps its size: beyond it particles are counted dropped)."""
-        if not rate >= 0:
-            raise ValueError(f"rate: must be >= 0, got {rate}")
-        self.scene.control.set_rate(self._emitter(name), rate)
+        s = self._live("set_rate")
+        e, r = self._emitter("set_rate", name), number("set_rate: rate", rate, 0.0, 1e8)
+        s.control.set_rate(e, r)
 
     def set_emitting(self, name: str, on: bool) -> None:
         """Start or stop an emitter's continuous emission (bursts from code still work)."""
-        self.scene.control.set_emitting(self._emitter(name), on)
+        s = self._live("set_emitting")
+        e, on = self._emitter("set_emitting", name), boolean("set_emitting: on", on)
+        s.control.set_emitting(e, on)
 
     def burst(self, name: str, count: int, position=None) -> None:
-        """Emit ``count`` particles from ``name`` at the start of the next step; with ``position``
-        the emitter is first placed there (a jump, not a motion: nothing is inherited)."""
-        e, ctl = self._emitter(name), self.scene.control
-        if position is not None:
-            ctl.place_emitter(e, self.time, position)
-        ctl.burst(e, count)
+        """Emit ``count`` particles from ``name`` at the start of the next step — at ``position``
+        if given, without moving the emitter (a spark shower where a bullet hits)."""
+        s = self._live("burst")
+        e = self._emitter("burst", name)
+        ring = s.particles.layout.sizes[e]
+        n = integer("burst: count", count, 0, ring)
+        p = None if position is None else vector("burst: position", position)
+        if n:
+            s.control.burst(e, n, p)
 
     def move_collider(self, name: str, position, over: float | None = None) -> None:
         """Move collider ``name`` (a plane's point or a sphere's centre) to ``position`` by the end
         of the next step; its velocity is inferred, so it pushes particles and soft bodies."""
-        k = self.scene.colliders.index(name)
-        self.scene.control.move_collider(k, self.time, self.time + (over or self.scene.frame_dt), position)
+        s = self._live("move_collider")
+        k, p = self._collider("move_collider", name), vector("move_collider: position", position)
+        s.control.move_collider(k, s.t, s.t + self._over("move_collider", over, s), p)
 
     def set_wind(self, wind) -> None:
         """Air velocity (m/s) seen by drag."""
-        self.scene.control.set_wind(wind)
+        self._live("set_wind").control.set_wind(vector("set_wind: wind", wind))
 
     def set_gravity(self, g) -> None:
         """Gravity (m/s²) for particles and soft bodies."""
-        self.scene.control.set_gravity(g)
+        self._live("set_gravity").control.set_gravity(vector("set_gravity: g", g))
 
-    def _body(self, name):
-        for b in self.scene.bodies:
-            if b.cfg.name == name:
-                return b
-        raise KeyError(f"body: no body named {name!r} (names: {[b.cfg.name for b in self.scene.bodies]})")
+    def _body(self, where: str, name):
+        bodies = self._live(where).bodies
+        names = [b.cfg.name for b in bodies]
+        return bodies[names.index(checks.name(f"{where}: body", name, names, "body"))]
+
+    def _node(self, where: str, body, node) -> int:
+        return integer(f"{where}: node", node, 0, body.topology.node_count - 1)
 
     def pin(self, body: str, node: int, target=None) -> None:
         """Hold a node of a soft body at ``target`` (default: where it is), from the next step."""
-        self.scene.control.pin(self._body(body).index, node, target)
+        b = self._body("pin", body)
+        n = self._node("pin", b, node)
+        t = None if target is None else vector("pin: target", target)
+        self.scene.control.pin(b.index, n, t)
 
     def move_pin(self, body: str, node: int, target) -> None:
         """Drag a pinned node to ``target`` over the next step (a hand holding the cloth)."""
-        self.scene.control.move_pin(self._body(body).index, node, target)
+        b = self._body("move_pin", body)
+        n, t = self._node("move_pin", b, node), vector("move_pin: target", target)
+        self.scene.control.move_pin(b.index, n, t)
 
     def release(self, body: str, node: int) -> None:
-        self.scene.control.release(self._body(body).index, node)
+        b = self._body("release", body)
+        self.scene.control.release(b.index, self._node("release", b, node))
 
     # -- read-back --------------------------------------------------------------------------------
     def particles(self) -> dict:
         """Live particles as NumPy arrays (copies; Taichi fields are not shared memory on every
         backend): ``position`` (N, 3), ``velocity`` (N, 3), ``age`` (N,), ``life`` (N,),
         ``emitter`` (N,) index, ``color`` (N, 3) linear RGB from the emitter's ramp."""
-        out = self.scene.live_particles()
-        out["color"] = self._colors(out["emitter"], np.clip(out["age"] / out["life"], 0, 1))
+        out = self._live("particles").live_particles()
+        out["color"] = self._colors(out["emitter"], np.clip(out["age"] / np.maximum(out["life"], 1e-30), 0, 1))
         return out
 
     def _colors(self, emitter, t):
@@ -202,117 +302,108 @@ class ParticleScene:
         return col
 
     def body_positions(self, name: str) -> np.ndarray:
-        return self._body(name).positions()
+        """(N, 3) float32 node positions of body ``name`` (m)."""
+        return self._body("body_positions", name).positions()
 
     def energy(self) -> dict:
         """Per soft body: kinetic, gravitational and spring energy (J)."""
-        return {b.cfg.name or f"body{k}": b.system.energy() for k, b in enumerate(self.scene.bodies)}
+        return {b.cfg.name or f"body{k}": b.system.energy() for k, b in enumerate(self._live("energy").bodies)}
 
-    def contacts(self, min_speed: float = 0.0) -> Contacts:
-        """Contacts of the last ``step`` with impact speed >= ``min_speed`` (needs contacts=True)."""
+    def contacts(self, min_speed: float = 0.0, body: str | None = None) -> Contacts:
+        """Every contact since the previous call (the queue drains), however many steps ran,
+        with impact speed >= ``min_speed`` (slower ones are drained too): particle contacts, or
+        the nodes of soft body ``body`` (built with ``contacts = true`` in its config). Needs
+        the scene built with contacts; ``dropped`` counts those past the buffer."""
+        s = self._live("contacts")
+        v = number("contacts: min_speed", min_speed, 0.0, COORD)
+        b = None if body is None else self._body("contacts", body)
         if not self._contacts:
             raise RuntimeError("contacts: build the scene with contacts=True to record them")
-        if self._last_contacts is None:
-            p = self.scene.particles
-            if p is None:
-                empty = np.zeros(0)
-                self._last_contacts = Contacts(empty.astype(np.int32), np.zeros((0, 3)), np.zeros((0, 3)),
-                                               empty, empty)
-            else:
-                (collider, pos, normal, speed, time, _slot), dropped = p.contacts()
-                self._last_contacts = Contacts(collider, pos, normal, speed, time, dropped=dropped)
-        c = self._last_contacts
-        m = c.speed >= min_speed
-        return Contacts(c.collider[m], c.position[m], c.normal[m], c.speed[m], c.time[m], c.dropped)
+        names = tuple(c.name for c in self.cfg.colliders)
+        if b is not None:
+            if not b.cfg.contacts:
+                raise RuntimeError(f"contacts: body {body!r} does not record contacts: set contacts = true "
+                                   f"in its config")
+            c = b.system.contact_log.drain(names)
+        else:
+            c = s.particles.contacts(names) if s.particles is not None else Contacts.empty(names)
+        return c.where(c.speed >= v) if v > 0 else c
 
     def render(self, width: int | None = None, height: int | None = None, camera: Camera | None = None,
                show_colliders: bool | None = None, *, out: np.ndarray | None = None,
-               transparent: bool = False, bgra: bool = False) -> np.ndarray:
-        """(H, W, 4) uint8 RGBA image of the current state, any size, any camera (a new size or
-        camera compiles nothing). ``out``: a C-contiguous (H, W, 4) uint8 array to draw into
-        (no allocation per frame). Opaque, unless ``transparent``: premultiplied RGBA with alpha 0
-        where nothing is drawn, to composite over the game's own frame with the blend
-        (ONE, ONE_MINUS_SRC_ALPHA) — additive light carries alpha 0, so it adds. ``bgra``: bytes
-        in B, G, R, A order, as SDL/pygame and X11 surfaces take them."""
-        return self.scene.render(width, height, camera, show_colliders, out=out, transparent=transparent,
-                                 bgra=bgra)
+               transparent: bool = False, bgra: bool = False, alpha: float | None = None) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA image of the current state, any size (16 to 16,384 a side, at most
+        4 GiB of render memory), any camera: neither compiles anything. ``out``: a C-contiguous
+        (H, W, 4) uint8 array to draw into (no allocation per frame). Opaque, unless
+        ``transparent``: premultiplied RGBA, alpha 0 where nothing is drawn, to composite over the
+        game's frame with the blend (ONE, ONE_MINUS_SRC_ALPHA) — additive light carries alpha 0,
+        so it adds. ``bgra``: bytes in B, G, R, A order, as SDL/pygame and X11 surfaces take them.
+        ``alpha``: draw particles between their positions before and after the last step
+        (``FixedTimestep.alpha``; a scene built with ``interpolate=True``)."""
+        s = self._live("render")
+        w, h = checks.image_size("render", width, height, (s.width, s.height))
+        cam = None if camera is None else checks.camera("render: camera", camera, Camera)
+        show = None if show_colliders is None else boolean("render: show_colliders", show_colliders)
+        flags = [boolean(f"render: {k}", v) for k, v in (("transparent", transparent), ("bgra", bgra))]
+        if out is not None:
+            checks.image_array("render: out", out, w, h)
+        if alpha is not None:
+            alpha = number("render: alpha", alpha, 0.0, 1.0)
+            if not self._interpolate:
+                raise ValueError("render: alpha: the scene keeps no last-step positions: build it with "
+                                 "interpolate=True")
+        if s.renderer is None:
+            raise RuntimeError("render: this scene was built with render=False")
+        return s.render(w, h, cam, show, out=out, transparent=flags[0], bgra=flags[1], alpha=alpha)
 
     # -- changing what the scene holds (rebuilds between frames) -----------------------------------
-    def _data_now(self) -> dict:
-        return self._data if self._data is not None else self.cfg.model_dump(exclude_none=True)
+    def _rebuild(self, where: str, data: dict) -> None:
+        old = self._live(where)
+        self._install(data, where, previous=old)
 
-    def _rebuild(self, data: dict) -> None:
-        new_cfg = load_config(data)
-        self.scene = Scene(new_cfg, render=self._render, contacts=self._contacts, previous=self.scene)
-        self.cfg, self._data = new_cfg, data
+    def _add(self, where: str, key: str, item) -> None:
+        if not isinstance(item, dict):
+            raise TypeError(f"{where}: {checks.show(item)} is not a dict of config keys")
+        data = copy.deepcopy(self._data)
+        data.setdefault(key, []).append(checks.plain(copy.deepcopy(item)))
+        self._rebuild(where, data)
 
-    def _add(self, key: str, item: dict) -> None:
-        data = self._data_now()
-        data.setdefault(key, []).append(dict(item))
-        self._rebuild(data)
-
-    def _remove(self, key: str, name: str) -> None:
-        data = self._data_now()
+    def _remove(self, where: str, key: str, name: str) -> None:
+        data = copy.deepcopy(self._data)
         data[key] = [x for x in data.get(key, []) if x.get("name") != name]
-        self._rebuild(data)
+        self._rebuild(where, data)
 
     def add_emitter(self, emitter: dict) -> None:
-        self._add("emitters", emitter)
+        """Add an emitter (a dict of config keys) between frames. One whose needs the scene
+        already compiled (its blend mode and force terms; no sub-emitters) and that fits the
+        spare rows and slots is written into them: nothing compiles. Otherwise the scene is
+        rebuilt around it (a compile), carrying live particles over."""
+        s = self._live("add_emitter")
+        if not isinstance(emitter, dict):
+            raise TypeError(f"add_emitter: {checks.show(emitter)} is not a dict of config keys")
+        data = copy.deepcopy(self._data)
+        data.setdefault("emitters", []).append(checks.plain(copy.deepcopy(emitter)))
+        cfg = _load("add_emitter", data)
+        self.last_add = s.why_not_add(cfg)  # None: added in place
+        if self.last_add is None:
+            s.add_emitters(cfg)
+            self.cfg, self._data = cfg, data
+        else:
+            self._rebuild("add_emitter", data)
 
     def remove_emitter(self, name: str) -> None:
-        self._emitter(name)  # a clear KeyError for an unknown name
-        self._remove("emitters", name)
+        self._live("remove_emitter")
+        self._remove("remove_emitter", "emitters", self.cfg.emitters[self._emitter("remove_emitter", name)].name)
 
     def add_collider(self, collider: dict) -> None:
-        self._add("colliders", collider)
+        self._add("add_collider", "colliders", collider)
 
     def remove_collider(self, name: str) -> None:
-        self.scene.colliders.index(name)
-        self._remove("colliders", name)
+        self._live("remove_collider")
+        self._remove("remove_collider", "colliders", self.cfg.colliders[self._collider("remove_collider", name)].name)
 
     def add_body(self, body: dict) -> None:
-        self._add("bodies", body)
+        self._add("add_body", "bodies", body)
 
     def remove_body(self, name: str) -> None:
-        self._body(name)
-        self._remove("bodies", name)
-
-
-class SceneBuilder:
-    """Build a scene in code: ``SceneBuilder(fps=60).emitter(rate=200, effect="sparks")
-    .collider(type="plane").body(type="cloth", ...).build(contacts=True)``. Keys are the config's
-    keys and are validated the same way (unknown keys are errors naming the nearest one)."""
-
-    def __init__(self, **scene_keys):
-        self.data = dict(scene_keys)
-
-    def _table(self, key, **values):
-        self.data[key] = {**self.data.get(key, {}), **values}
-        return self
-
-    def camera(self, **kw):
-        return self._table("camera", **kw)
-
-    def solver(self, **kw):
-        return self._table("solver", **kw)
-
-    def forces(self, **kw):
-        return self._table("forces", **kw)
-
-    def render(self, **kw):
-        return self._table("render", **kw)
-
-    def emitter(self, **kw):
-        self.data.setdefault("emitters", []).append(kw)
-        return self
-
-    def collider(self, **kw):
-        self.data.setdefault("colliders", []).append(kw)
-        return self
-
-    def body(self, **kw):
-        self.data.setdefault("bodies", []).append(kw)
-        return self
-
-    def build(self, **kw) -> ParticleScene:
-        return ParticleScene(copy.deepcopy(self.data), **kw)
+        self._remove("remove_body", "bodies", self._body("remove_body", name).cfg.name)

@@ -56,7 +56,9 @@ class Body:
     at the positions the scene's control gives: a moving collider infers its velocity from its
     own updates) and what the renderer draws."""
 
-    def __init__(self, cfg, collider_specs, control, default_integrator, index: int = 0):
+    def __init__(self, cfg, collider_specs, control, default_integrator, index: int = 0, contacts: int = 0):
+        """``contacts``: node–collider records kept between drains when the body's config asks
+        (``contacts = true``)."""
         self.cfg, self.index = cfg, index
         self.topology = build_topology(cfg)
         n = self.topology.node_count
@@ -70,7 +72,8 @@ class Body:
         self.system = SpringSystem(self.topology, colliders=self.colliders, control=control,
                                    integrator=integrator, substeps=cfg.substeps,
                                    xpbd_iterations=cfg.iterations, max_stretch=cfg.max_stretch,
-                                   name=f"bodies[{index}] ({cfg.type})")
+                                   name=f"bodies[{index}] ({cfg.type})",
+                                   contacts=contacts if cfg.contacts else 0)
         self.control = control
         self.pinned = np.array(self.topology.pinned, np.int64)
         self.pin_home = self.topology.positions[self.pinned].copy() if len(self.pinned) else None
@@ -94,6 +97,11 @@ class Body:
                 self.system.set_pin_target(int(node), home + offset)
         self.system.apply(self.control.take_pins(self.index))
         self.system.step(dt)
+
+    def reset(self) -> None:
+        """Back to the rest state at t = 0, pins as configured (a reused scene)."""
+        self.system.reset()
+        self.released = False
 
     def use_control(self, control) -> None:
         """Take inputs from ``control`` (the scene's rebuilt one, sharing the gravity field)."""

@@ -97,6 +97,16 @@ class Colliders:
         self.collider_point.from_numpy(self._pos)
         self._t = 0.0
         self._band = contact_band(dtype)
+        self._moved = False
+
+    def reset(self) -> None:
+        """Back where the specs start, at rest, at t = 0 (a reused scene)."""
+        if self._moved:
+            for k, s in enumerate(self.specs):
+                self._pos[k] = s.position_at(0.0) + self.shift[k]
+            self.collider_point.from_numpy(self._pos)
+            self.collider_vel.from_numpy(np.zeros_like(self._pos))
+        self._t, self._moved = 0.0, False
 
     def _placed(self, positions) -> np.ndarray:
         pos = np.asarray(positions, np.float64).reshape(self.count, 3)
@@ -114,7 +124,7 @@ class Colliders:
         dt = t - t0
         vel = (new - old) / dt if dt > 0 else np.zeros_like(new)
         self._pos[: self.count] = new
-        self._t = t
+        self._t, self._moved = t, True
         self.collider_point.from_numpy(self._pos)
         v = np.zeros_like(self._pos)
         v[: self.count] = vel

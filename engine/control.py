@@ -31,7 +31,8 @@ def _vec(p) -> tuple:
 @dataclass
 class EmitterInput:
     """One emitter's inputs: ``rate`` (particles/s), ``emitting`` (continuous emission on),
-    ``bursts`` (counts to emit at the start of the next step), ``path`` and its rest ``position``."""
+    ``bursts`` ((count, position or None) to emit at the start of the next step: at the emitter,
+    or at that position without moving it), ``path`` and its rest ``position``."""
 
     position: tuple
     rate: float = 0.0
@@ -88,15 +89,30 @@ class Control:
         self.pins: List[List[PinRequest]] = [[] for _ in range(bodies)]
         self.body_names: List[str] = [""] * bodies
 
+    @staticmethod
+    def inputs_for(cfg, collider_specs):
+        """(emitter inputs, collider inputs) a validated config starts with."""
+        ems = [EmitterInput(_vec(e.position), e.rate, e.emitting,
+                            [(k.time, _vec(k.position)) for k in e.path], name=e.name) for e in cfg.emitters]
+        return ems, [ColliderInput.from_spec(s) for s in collider_specs]
+
     @classmethod
     def for_scene(cls, cfg, collider_specs) -> "Control":
         """The inputs a validated config starts with."""
-        ems = [EmitterInput(_vec(e.position), e.rate, e.emitting,
-                            [(k.time, _vec(k.position)) for k in e.path], name=e.name) for e in cfg.emitters]
-        cols = [ColliderInput.from_spec(s) for s in collider_specs]
+        ems, cols = cls.inputs_for(cfg, collider_specs)
         new = cls(cfg.forces.gravity, cfg.forces.wind, ems, cols, len(cfg.bodies))
         new.body_names = [b.name for b in cfg.bodies]
         return new
+
+    def restart(self, cfg, collider_specs) -> None:
+        """Back to the inputs ``cfg`` starts with, in place: the same fields and lists (kernels
+        and systems built against them stay valid; a scene reused for a level restart)."""
+        self.set_gravity(cfg.forces.gravity)
+        self.set_wind(cfg.forces.wind)
+        ems, cols = self.inputs_for(cfg, collider_specs)
+        self.emitters[:], self.colliders[:] = ems, cols
+        for pending in self.pins:
+            pending.clear()
 
     def rebuilt(self, cfg, collider_specs) -> "Control":
         """The inputs of the same scene rebuilt with ``cfg`` (emitters, colliders or bodies added
@@ -135,9 +151,10 @@ class Control:
     def set_emitting(self, e: int, on: bool) -> None:
         self.emitters[e].emitting = bool(on)
 
-    def burst(self, e: int, count: int) -> None:
-        """``count`` particles from emitter e at the start of the next step."""
-        self.emitters[e].bursts.append(int(count))
+    def burst(self, e: int, count: int, position=None) -> None:
+        """``count`` particles from emitter e at the start of the next step, at ``position`` if
+        given (the emitter stays where it is)."""
+        self.emitters[e].bursts.append((int(count), None if position is None else _vec(position)))
 
     # -- colliders --------------------------------------------------------------------------------
     def move_collider(self, k: int, t_now: float, t_next: float, position) -> None:

@@ -51,13 +51,18 @@ class Scene:
     """Everything one config needs, built once. ``advance_frame()`` steps to the next frame time;
     ``render()`` draws the current state."""
 
-    def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, previous=None):
-        """``contacts``: record up to this many particle–collider contacts per advance (0: the
-        contact code is not compiled). ``previous``: the scene this one replaces (a rebuild
+    def __init__(self, cfg, *, width=None, height=None, render=True, contacts: int = 0, previous=None,
+                 interpolate: bool = False, spare=(0, 0)):
+        """``contacts``: keep up to this many particle–collider contact records between drains
+        (0: the contact code is not compiled), and as many node contacts for each body whose
+        config asks for them. ``interpolate``: keep the particles' positions before each game
+        step (:meth:`save_positions`) so ``render(alpha=)`` can draw between the last two steps.
+        ``spare``: (emitter rows, pool slots) beyond the config's, for :meth:`add_emitters`.
+        ``previous``: the scene this one replaces (a rebuild
         between frames): its time, statistics, inputs and live particles carry over by name, and
         its soft bodies whose config did not change are kept without recompiling them."""
         runtime.ensure_init()
-        self.cfg = cfg
+        self.cfg = self._built = cfg
         self.t = 0.0
         self.frame = 0
         self.frame_dt = 1.0 / cfg.fps
@@ -69,8 +74,8 @@ class Scene:
         else:
             self.control = previous.control.rebuilt(cfg, specs)
             self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
-        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts)
-                          if cfg.emitters else None)
+        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate,
+                                         spare) if cfg.emitters else None)
         if previous is not None and previous.particles is not None and self.particles is not None:
             self.particles.carry_from(previous.particles)
         self.bodies = []
@@ -85,7 +90,7 @@ class Scene:
                     old.use_control(self.control)
                     self.bodies.append(old)
                 else:
-                    self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k))
+                    self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k, contacts))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
@@ -93,7 +98,7 @@ class Scene:
 
             p = self.particles
             self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
-                                     bodies=self.bodies)
+                                     bodies=self.bodies, rows=p.emitters.count if p else 0)
         self.width = int(width or cfg.render.width)
         self.height = int(height or cfg.render.height)
 
@@ -105,6 +110,70 @@ class Scene:
         for body in self.bodies:
             body.step(self.t, dt)
         self.t += dt
+
+    def why_not_add(self, cfg):
+        """Why the emitters ``cfg`` appends to this scene's config cannot be added in place
+        (:meth:`add_emitters`), or None."""
+        if self.particles is None:
+            return "the scene was built without particles"
+        look = self.renderer.look if self.renderer is not None else None
+        if look is not None and not look.covers(cfg.emitters):
+            return "it needs a blend mode the scene did not compile"
+        return self.particles.why_not_add(cfg)
+
+    def add_emitters(self, cfg) -> None:
+        """Add the emitters ``cfg`` appends, in place: spare rows and slots, no compile."""
+        n = len(self.cfg.emitters)
+        self.control.emitters.extend(Control.inputs_for(cfg, ())[0][n:])
+        self.particles.add_emitters(cfg)
+        if self.renderer is not None:
+            self.renderer.look.update(cfg.emitters)
+        self.cfg = cfg
+
+    def reset(self) -> None:
+        """Back to the state the build left (t = 0, the config's inputs, empty pools, bodies at
+        rest, emitters added since removed), keeping every field, compiled kernel and render
+        target: a level restart costs launches, not compiles. The same config then gives the
+        same bytes as a fresh build."""
+        if self.cfg is not self._built:
+            self.cfg = self._built
+            if self.renderer is not None and self.particles is not None:
+                self.renderer.look.update(self._built.emitters)
+        self.t, self.frame = 0.0, 0
+        self.stats.__dict__.update(Stats().__dict__)  # (the drivers hold this object)
+        self.control.restart(self.cfg, self.colliders.specs)
+        self.colliders.reset()
+        if self.particles is not None:
+            self.particles.reset()
+        for body in self.bodies:
+            body.reset()
+
+    def warm_up(self, sizes=()) -> None:
+        """Compile what a game calls: a step with a burst from every emitter and every collider
+        moving, the read-backs and contact drains, a render at each (W, H) of ``sizes``; then
+        :meth:`reset` (a loading screen pays the compile cost, not the first frames)."""
+        ctl = self.control
+        for e in range(len(ctl.emitters)):
+            ctl.burst(e, 1)
+        for k in range(len(ctl.colliders)):
+            ctl.move_collider(k, 0.0, self.frame_dt, ctl.collider_positions(0.0)[k])
+        self.save_positions()
+        self.advance(self.frame_dt)
+        self.live_particles()
+        self.live_count()
+        if self.particles is not None:
+            self.particles.contacts()
+            self.particles.emitters.carry_local(0.0, 0.0, compile_only=True)
+        for body in self.bodies:
+            body.positions()
+            body.system.contact_log.drain()
+        for w, h in sizes:
+            self.render(w, h)
+        self.reset()
+
+    def save_positions(self) -> None:
+        if self.particles is not None:
+            self.particles.save_positions()
 
     def advance_frame(self) -> None:
         """Step to the next frame time; the live count is read back once per frame."""
@@ -120,14 +189,15 @@ class Scene:
         return self.particles.count_alive() if self.particles is not None else 0
 
     def render(self, width=None, height=None, camera=None, show_colliders=None, *, out=None,
-               transparent=False, bgra=False) -> np.ndarray:
+               transparent=False, bgra=False, alpha=None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA image of the current state (into ``out`` if given); any size and
-        camera, compiled once (engine.render.renderer)."""
+        camera, compiled once (engine.render.renderer). ``alpha``: draw particles that far from
+        their positions before the last step to their positions now (built with ``interpolate``)."""
         if self.renderer is None:
             raise RuntimeError("render: this scene was built with render=False")
         return self.renderer.render(camera or self.camera, width or self.width, height or self.height,
                                     out=out, show_colliders=show_colliders, transparent=transparent,
-                                    bgra=bgra)
+                                    bgra=bgra, blend=1.0 if alpha is None else float(alpha))
 
     # -- read-back ----------------------------------------------------------------------------
     @property

@@ -1,5 +1,6 @@
 """The engine from a game loop: the Python API, fixed timestep, control, contacts, read-back."""
 import numpy as np
+import pytest
 
 from engine.api import FixedTimestep, ParticleScene, SceneBuilder
 from engine.render.camera import Camera
@@ -136,11 +137,20 @@ def test_independent_scenes_in_one_process_and_rebuilds_keep_particles():
     assert len(a.particles()["position"]) == 3000  # removing a collider keeps the particles
 
 
+@pytest.mark.slow  # (a scene with smoke, sparks and a cloth, 330 rendered frames: ~40 s under load)
 def test_game_example_runs_headless():
-    from engine.tools.examples.sphere_game import run_headless
+    """The pygame example, headless: contacts flash the ball, sparks fly on landings, the level
+    restarts by reusing its scene, and the overlay composites over the game's own frame."""
+    from engine import reuse
+    from engine.tools.examples.sphere_game import SKY_TOP, run_headless
 
-    scene, player, log = run_headless(200, quiet=True)
-    assert any("landed" in line for line in log)
-    assert any("particle hits on the ball" in line for line in log)
-    curtain = scene.body_positions("curtain")
+    reused = reuse.counts["reused"]
+    game = run_headless(330, size=(160, 90), fps=50.0, restart_every=3.0, quiet=True)
+    assert any("landed" in line for line in game.log)
+    assert game.flashes > 0 and any("flash" in line for line in game.log)
+    assert len(game.restarts) == 2 and reuse.counts["reused"] == reused + 2
+    curtain = game.scene.body_positions("curtain")
     assert np.isfinite(curtain).all() and curtain[:, 1].min() > -0.01
+    screen = game.pixels()
+    assert tuple(screen[0, 0]) == SKY_TOP  # the overlay is transparent where nothing is drawn
+    assert game.overlay[..., 3].max() > 0 and (game.overlay[..., 3] == 0).mean() > 0.3

@@ -83,6 +83,7 @@ print(h.hexdigest(), *s.particles.emitters.emitted_counts())
 """
 
 
+@pytest.mark.slow  # (the default run checks campfire's sub-emitters at 1 vs 2 threads in test_render.py)
 def test_sub_emitters_give_the_same_bytes_with_one_and_two_threads(tmp_path):
     """Children take slots from a chunked prefix sum over the parents (several slices here):
     the pool is byte-identical for any thread count."""

@@ -11,16 +11,22 @@ EXPECTED = {
     "step": ["engine step 20k", "fused kernel alone 20k", "NumPy in-place 20k", "bandwidth limit 20k",
              "engine step 100k", "fused kernel alone 100k", "NumPy in-place 100k",
              "bandwidth limit 100k"],
-    "frame": ["frame, tiled splat", "frame, serial splat (before)", "step (advance_frame)",
-              "background", "splat, tiled", "splat, serial", "resolve + tone map", "image read-back"],
+    "frame": ["frame (step + render)", "frame, per-pixel schedule", "step (advance_frame)", "render",
+              "render, background redrawn"],
+    "effects": ["sparks", "worst effect", "empty scene, render only"],
     "ode": ["engine RK4 step doubling (f32)", "scipy solve_ivp RK45 (f64)"],
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
     "features": ["all features", "none of them"],
     "output": ["sim + render (no output)", "particles run, 1 encoder"],
+    "wedge": ["2 x particles run, one after another", "particles wedge, 2 workers x 1 thread"],
+    "api": ["first build of sparks", "level restart", "second copy, prepared", "3 build/discard cycles",
+            "add_emitter, effect compiled", "a new render size", "argument checks per frame",
+            "first call, new field (template)", "first call, new ndarray"],
 }
-# start-up runs `particles run` in subprocesses (a cold compile each) and output builds three
-# scenes: together half the quick bench's time, so they run with the slow tests
-SLOW = ("startup", "output")
+# the sections that build scenes (a compile each: frame, effects, features, cloth, output, api),
+# run `particles run` in subprocesses (startup) or start Dask workers (wedge) run with the slow
+# tests; the default run checks the table with the step and ODE sections
+SLOW = ("frame", "startup", "output", "effects", "features", "cloth", "wedge", "api")
 
 
 def check_rows(rows, sections):
@@ -32,6 +38,8 @@ def check_rows(rows, sections):
         assert math.isfinite(r.value) and r.value > 0, r
     table = bench.format_table(rows)
     assert all(n in table for n in names)
+    # the wedge renders the same bytes as `particles run` with the same seeds
+    assert all(r.extra["same"] for r in rows if r.section.startswith("wedge") and "wedge" in r.name)
     return names
 
 
@@ -39,16 +47,19 @@ def test_quick_bench_has_every_row_with_finite_positive_figures():
     fast = [s for s in bench.SECTIONS if s not in SLOW]
     rows = bench.run(quick=True, only=fast)
     check_rows(rows, [s for s in fast if s in EXPECTED])
+
+
+@pytest.mark.slow
+def test_quick_bench_slow_sections():
+    rows = bench.run(quick=True, only=list(SLOW))
+    check_rows(rows, [s for s in SLOW if s in EXPECTED])
+    ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra and r.section.startswith("output")]
+    assert len(ratios) == 2 and all(0 < q < 10 for q in ratios)
+    assert any(r.section.startswith("effects") and r.name == "worst effect" for r in rows)
     if cloth.available():
         assert any("cloth" in r.section for r in rows)
     feats = {r.name: r.extra["kernels"] for r in rows if r.section.startswith("features")}
     # a scene without optional features compiles no more kernels than the full one
     assert len(feats["none of them"]) <= len(feats["all features"])
-
-
-@pytest.mark.slow
-def test_quick_bench_startup_and_output_sections():
-    rows = bench.run(quick=True, only=list(SLOW))
-    check_rows(rows, SLOW)
-    ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra]
-    assert len(ratios) == 2 and all(0 < q < 10 for q in ratios)
+    share = [r.extra["checks_share"] for r in rows if "checks_share" in r.extra]
+    assert len(share) == 1 and 0 < share[0] < 1

@@ -1,6 +1,6 @@
-"""The budget's memory estimate against the Taichi fields a real scene allocates: the estimate is
-read off the field definitions by hand (engine/tools/budget.py), so a pool, renderer or spring
-network that grows must fail here rather than let the budget go stale."""
+"""The budget's memory estimate against the Taichi fields and ndarrays a real scene allocates once
+it has drawn a frame: the estimate is read off the definitions by hand (engine/tools/budget.py), so
+a pool, renderer or spring network that grows must fail here rather than let the budget go stale."""
 import math
 
 import pytest
@@ -15,8 +15,9 @@ _BYTES = {ti.f32: 4, ti.i32: 4, ti.u32: 4, ti.u8: 1, ti.i8: 1, ti.f64: 8, ti.i64
 
 
 def field_bytes(root) -> int:
-    """Bytes of every distinct Taichi field reachable from ``root`` through attributes, lists,
-    tuples and dicts."""
+    """Bytes of every distinct Taichi field and ndarray reachable from ``root`` through
+    attributes, lists, tuples and dicts."""
+    from taichi.lang._ndarray import Ndarray
     from taichi.lang.field import Field
 
     seen, total, todo = set(), 0, [root]
@@ -29,6 +30,8 @@ def field_bytes(root) -> int:
             cells = math.prod(obj.shape) if obj.shape else 1
             width = getattr(obj, "n", 1) * (getattr(obj, "m", 1) or 1)
             total += cells * width * _BYTES[obj.dtype]
+        elif isinstance(obj, Ndarray):
+            total += obj.to_numpy().nbytes
         elif isinstance(obj, dict):
             todo += list(obj.values())
         elif isinstance(obj, (list, tuple, set)):
@@ -52,6 +55,7 @@ def test_memory_estimate_matches_the_fields_a_scene_allocates(case):
                            "bodies": [{"type": "cloth", "resolution": [64, 64],
                                        "integrator": "rk4", "damping": 0.01}]})
     scene = Scene(cfg)
+    scene.render()  # the image-sized arrays are allocated at the first frame of a size
     actual = field_bytes(scene)
     est = budget.estimate(cfg, 320, 180, frames_in_flight=0)
     assert est.parts["frames in flight"] == 0

@@ -43,6 +43,7 @@ def _rows(path):
     return rows
 
 
+@pytest.mark.slow  # (the quick charts take a minute to compute)
 def test_quick_run_writes_every_csv_and_png(quick_charts):
     out, paths = quick_charts
     names = {p.split("/")[-1] for p in paths}
@@ -58,6 +59,7 @@ def test_quick_run_writes_every_csv_and_png(quick_charts):
         assert fh.readline().strip().split(",") == FIELDS
 
 
+@pytest.mark.slow  # (the quick charts take a minute to compute)
 def test_fixed_step_slopes_on_drag(quick_charts):
     out, _ = quick_charts
     rows = _rows(out / "workprec_projectile_drag.csv")
@@ -66,6 +68,7 @@ def test_fixed_step_slopes_on_drag(quick_charts):
     assert fixed_slope(rows, "midpoint") == pytest.approx(-2.0, abs=0.15)
 
 
+@pytest.mark.slow  # (the quick charts take a minute to compute)
 def test_kepler_adaptive_rk4_beats_fixed_rk4_at_1e_5(quick_charts):
     out, _ = quick_charts
     rows = _rows(out / "workprec_kepler.csv")
@@ -77,6 +80,7 @@ def test_kepler_adaptive_rk4_beats_fixed_rk4_at_1e_5(quick_charts):
     assert min(adaptive) < min(fixed) / 5  # NUMERICS.md: ~2,840 against ~64,000
 
 
+@pytest.mark.slow  # (the quick charts take a minute to compute)
 def test_workprec_rows_are_sane(quick_charts):
     out, _ = quick_charts
     rows = _rows(out / "workprec_lotka-volterra.csv")
@@ -92,6 +96,7 @@ def test_workprec_rows_are_sane(quick_charts):
     assert all(math.isfinite(r["wall_s"]) and r["wall_s"] >= 0 for r in rows)
 
 
+@pytest.mark.slow  # (the quick charts take a minute to compute)
 def test_stability_and_energy_csv(quick_charts):
     out, _ = quick_charts
     with open(out / "stability.csv", newline="") as fh:

@@ -21,7 +21,8 @@ from configgen import BASE, apply, malformed, to_toml
 from flaggen import bad_call
 from runhelp import ENV, call
 
-FUZZ_EXAMPLES = 1000
+FUZZ_EXAMPLES = 300  # per default run; the slow run checks SLOW_FUZZ_EXAMPLES more
+SLOW_FUZZ_EXAMPLES = 1000
 QUOTED = re.compile(r'"(?:[^"\\]|\\.)*"')
 
 
@@ -66,10 +67,10 @@ def test_base_config_is_valid(scratch):
     assert call("validate", path)[0] == 0
 
 
-def test_malformed_configs_give_one_line_per_problem_naming_the_key(scratch):
+def fuzz_malformed(scratch, examples):
     seen = []
 
-    @settings(max_examples=FUZZ_EXAMPLES, deadline=None,
+    @settings(max_examples=examples, deadline=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
     @given(muts=malformed)
     def check(muts):
@@ -88,7 +89,16 @@ def test_malformed_configs_give_one_line_per_problem_naming_the_key(scratch):
         assert not os.path.exists(dest) and not os.path.exists(os.path.join("renders", "bad"))
 
     check()
-    assert len(seen) >= FUZZ_EXAMPLES
+    assert len(seen) >= examples
+
+
+def test_malformed_configs_give_one_line_per_problem_naming_the_key(scratch):
+    fuzz_malformed(scratch, FUZZ_EXAMPLES)
+
+
+@pytest.mark.slow
+def test_many_more_malformed_configs(scratch):
+    fuzz_malformed(scratch, SLOW_FUZZ_EXAMPLES)
 
 
 @settings(max_examples=200, deadline=None)

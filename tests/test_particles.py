@@ -239,7 +239,7 @@ def test_fixed_steps_fused_into_runs_give_the_same_bytes_as_step_by_step(monkeyp
     from engine.particles import integrate, system
 
     d = scene_dict(frames=1, fps=30, seed=2, solver={"integrator": "rk4", "h": 1 / 240, "impacts": impacts},
-                   forces={"gravity": [0.0, -9.81, 0.0], "drag": 0.4, "turbulence": {"strength": 3.0}},
+                   forces={"gravity": [0.0, -9.81, 0.0], "drag": 0.4},
                    emitters=[{"rate": 20.0, "lifetime": 3.0, "speed": [1.0, 3.0], "spread": 40.0,
                               "buoyancy": 4.0, "bursts": [{"time": 0.0, "count": 500}]}],
                    colliders=[{"type": "plane"}])

@@ -122,6 +122,7 @@ def test_emitter_over_capacity_keeps_running_and_reports_drops(tmp_path):
     assert "particles did not fit" in err and f"{dropped:,}" in err
 
 
+@pytest.mark.slow  # (the default run checks 1 vs 2 threads in tests/test_render.py)
 def test_frames_are_identical_with_one_and_two_threads(tmp_path):
     outs = []
     for threads, where in ((1, "before"), (2, "after"), (2, "again")):

@@ -173,6 +173,8 @@ class Emitter(Strict):
     size: List[ScalarStop] = [[0.0, 0.05]]  # [[t, diameter m], ...]
     size_randomness: Fraction01 = 0.0
     streak: NonNeg = 0.0  # draw a motion streak of streak × velocity (seconds)
+    # "local": live particles are carried with the emitter's motion (a jet on a moving ship)
+    space: Literal["world", "local"] = "world"
 
     @model_validator(mode="after")
     def _check(self):
@@ -296,6 +298,7 @@ class Body(Strict):
     max_stretch: Optional[Annotated[float, Field(ge=0, le=10)]] = None  # inextensibility cap
     thickness: Annotated[float, Field(ge=0, le=1)] = 0.015  # m kept between nodes and colliders
     color: Annotated[List[Annotated[float, Field(ge=0, le=10)]], Field(min_length=3, max_length=3)] = [0.55, 0.6, 0.7]
+    contacts: bool = False  # record node–collider contacts (the game API's contacts(body=name))
 
     @model_validator(mode="after")
     def _check(self):

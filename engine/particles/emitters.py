@@ -14,6 +14,7 @@ from typing import List
 import numpy as np
 import taichi as ti
 
+from . import local_space as _local
 from . import spawn as _k
 from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
 
@@ -34,7 +35,8 @@ class EmitterClock:
 
     def schedule(self, t0: float, t1: float, inp):
         """Spawns for [t0, t1) not scheduled yet, from the emitter's input ``inp`` (rate,
-        emitting, pending bursts): a list of (count, birth-time start, span)."""
+        emitting, pending bursts): a list of (count, birth-time start, span, position or None:
+        at the emitter)."""
         out = []
         a, b = max(t0, self.until, self.start), min(t1, self.stop)
         self.until = max(self.until, t1)
@@ -43,61 +45,118 @@ class EmitterClock:
             k = int(math.floor(exact))
             self.carry = exact - k
             if k:
-                out.append((k, a, b - a))
+                out.append((k, a, b - a, None))
         while self.next_burst < len(self.bursts) and self.bursts[self.next_burst][0] < t1:
             tb, count = self.bursts[self.next_burst]
             self.next_burst += 1
-            out.append((count, max(tb, t0), 0.0))
-        out += [(count, t0, 0.0) for count in inp.bursts]
+            out.append((count, max(tb, t0), 0.0, None))
+        out += [(count, t0, 0.0, at) for count, at in inp.bursts]
         inp.bursts.clear()
         return out
 
 
 @ti.data_oriented
 class Emitters:
-    """Per-emitter parameters as fields (shape (E,)), ring heads and serial counters (fields, so
-    kernels and Python share one truth) and the clocks; ``inputs``: the control's emitter inputs."""
+    """Per-emitter parameters as fields (shape (rows,): one row per emitter, spare rows zero),
+    ring heads and serial counters (fields, so kernels and Python share one truth) and the
+    clocks; ``inputs``: the control's emitter inputs."""
 
-    def __init__(self, configs, layout, seed: int, inputs, state):
-        self.configs = list(configs)
+    def __init__(self, configs, layout, seed: int, inputs, state, rows: int = 0):
+        """``rows``: parameter rows to allocate (at least one per emitter): spare rows let
+        emitters be added later (:meth:`set_configs`) without new fields or compiles."""
         self.layout, self.seed, self.inputs, self.state = layout, int(seed), inputs, state
-        E = len(self.configs)
-        self.count = E
-        self.index = {c.name: e for e, c in enumerate(self.configs) if c.name}
-        cs = self.configs
-
-        def field(values, dtype=ti.f32):  # one parameter for every emitter, shape (E,) or (E, 3)
-            a = np.asarray(values, np.float32 if dtype == ti.f32 else np.int32).reshape(E, -1)
-            fld = ti.field(dtype, shape=E) if a.shape[1] == 1 else ti.Vector.field(a.shape[1], dtype, shape=E)
-            if E:
-                fld.from_numpy(a[:, 0] if a.shape[1] == 1 else a)
-            return fld
-
-        direction = np.array([c.direction for c in cs], np.float64).reshape(E, 3)
-        self.emitter_shape = field([SHAPES[c.shape] for c in cs], ti.i32)
-        self.emitter_surface = field([int(c.surface) for c in cs], ti.i32)
-        self.emitter_radius = field([c.radius for c in cs])
-        self.emitter_cos_spread = field([math.cos(math.radians(c.spread)) for c in cs])
-        self.emitter_speed_min = field([c.speed[0] for c in cs])
-        self.emitter_speed_max = field([c.speed[1] for c in cs])
-        self.emitter_inherit = field([c.inherit_velocity for c in cs])
-        self.emitter_life = field([c.lifetime for c in cs])
-        self.emitter_life_rand = field([c.lifetime_randomness for c in cs])
-        self.emitter_drag = field([-1.0 if c.drag is None else c.drag for c in cs])  # −1: the scene's drag
-        self.emitter_box = field([c.box_size for c in cs])
-        self.emitter_dir = field(direction / np.linalg.norm(direction, axis=1, keepdims=True))
+        self.count = R = max(len(configs), int(rows))  # rows: a compile-time bound of the spawn kernel
+        self._params = {}
+        for name, (a, dtype) in self._arrays(configs).items():
+            vec = a.ndim == 2
+            fld = ti.Vector.field(a.shape[1], dtype, shape=R) if vec else ti.field(dtype, shape=R)
+            setattr(self, name, fld)
+            self._params[name] = fld
         # ring heads, serial numbers and counts: state the kernels and Python share
-        self.emitter_head, self.emitter_serial = field([0] * E, ti.i32), field([0] * E, ti.i32)
-        self.emitter_emitted, self.dropped = field([0] * E, ti.i32), field([0] * E, ti.i32)
-        self.clocks = [EmitterClock(c.start, math.inf if c.stop is None else c.stop,
-                                    sorted((b.time + j * b.interval, b.count) for b in c.bursts
-                                           for j in range(b.cycles))) for c in cs]
+        self.emitter_head, self.emitter_serial = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
+        self.emitter_emitted, self.dropped = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
+        self.set_configs(configs)
+        if R:
+            self._zero_counters()
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
-        self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
-                       s.count, s.min_speed)
-                      for p, c in enumerate(self.configs) for s in c.sub_emitters]
         if self.links:
             self.link_counts = ti.field(ti.i32, shape=CHUNKS)
+
+    def _arrays(self, cs) -> dict:
+        """name → (array of shape (rows,) or (rows, 3), dtype) of every per-emitter parameter;
+        rows past the emitters are zero."""
+        def pad(values, dtype=ti.f32):
+            a = np.zeros((self.count,) + np.shape(values)[1:], np.float32 if dtype == ti.f32 else np.int32)
+            a[: len(values)] = values
+            return a, dtype
+
+        direction = np.array([c.direction for c in cs], np.float64).reshape(len(cs), 3)
+        return dict(
+            emitter_shape=pad([SHAPES[c.shape] for c in cs], ti.i32),
+            emitter_surface=pad([int(c.surface) for c in cs], ti.i32),
+            emitter_radius=pad([c.radius for c in cs]),
+            emitter_cos_spread=pad([math.cos(math.radians(c.spread)) for c in cs]),
+            emitter_speed_min=pad([c.speed[0] for c in cs]),
+            emitter_speed_max=pad([c.speed[1] for c in cs]),
+            emitter_inherit=pad([c.inherit_velocity for c in cs]),
+            emitter_life=pad([c.lifetime for c in cs]),
+            emitter_life_rand=pad([c.lifetime_randomness for c in cs]),
+            emitter_drag=pad([-1.0 if c.drag is None else c.drag for c in cs]),  # −1: the scene's drag
+            emitter_box=pad(np.array([c.box_size for c in cs], np.float64).reshape(len(cs), 3)),
+            emitter_dir=pad(direction / np.linalg.norm(direction, axis=1, keepdims=True)),
+        )
+
+    def set_configs(self, configs) -> None:
+        """Write every emitter's parameters (``configs``: the emitters there were, unchanged and
+        in order, then any new ones, at most ``count`` in all); new emitters get fresh clocks.
+        Writes fields only: nothing is allocated or compiled (after the first call)."""
+        cs = self.configs = list(configs)
+        if self.count:
+            for name, (a, _) in self._arrays(cs).items():
+                self._params[name].from_numpy(a)
+        self.index = {c.name: e for e, c in enumerate(cs) if c.name}
+        kept = getattr(self, "clocks", [])[: len(cs)]
+        self.clocks = kept + self._clocks()[len(kept):]
+        # local space: live particles carried with the emitter's motion (engine.particles.local_space)
+        self.local = [e for e, c in enumerate(cs) if c.space == "local"]
+        carried = getattr(self, "_carried", {})
+        self._carried = {e: carried.get(e, self.position_at(e, 0.0)) for e in self.local}
+        self.links = [(p, self.index[s.emitter], EVENT_DEATH if s.event == "death" else EVENT_COLLISION,
+                       s.count, s.min_speed)
+                      for p, c in enumerate(cs) for s in c.sub_emitters]
+
+    def _zero_counters(self) -> None:
+        zero = np.zeros(self.count, np.int32)
+        for f in (self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped):
+            f.from_numpy(zero)
+
+    def _clocks(self):
+        return [EmitterClock(c.start, math.inf if c.stop is None else c.stop,
+                             sorted((b.time + j * b.interval, b.count) for b in c.bursts for j in range(b.cycles)))
+                for c in self.configs]
+
+    def reset(self) -> None:
+        """Back to the start: clocks, ring heads, serial numbers and counts (a reused scene)."""
+        if self.count:
+            self._zero_counters()
+        self.clocks = self._clocks()
+        self._carried = {e: self.position_at(e, 0.0) for e in self.local}
+
+    def carry_local(self, t0: float, t1: float, compile_only: bool = False) -> None:
+        """Move the particles of local-space emitters with their emitter over [t0, t1]: by the
+        motion within the span (a particle born in it by the part after its birth, the path being
+        linear over a step) plus any jump since the last carry (older particles only).
+        ``compile_only``: launch once over no slot (a warm-up: also for a local emitter added
+        later)."""
+        if compile_only:
+            _local.carry(self.state, 0, 0, [0.0] * 3, [0.0] * 3, 1.0)
+            return
+        for e in self.local:
+            p0, p1 = self.position_at(e, t0), self.position_at(e, t1)
+            jump, self._carried[e] = p0 - self._carried[e], p1
+            if np.any(p1 != p0) or np.any(jump != 0):
+                _local.carry(self.state, self.layout.starts[e], self.layout.sizes[e],
+                             (p1 - p0).tolist(), jump.tolist(), t1 - t0)
 
     @property
     def uses_events(self) -> bool:
@@ -120,14 +179,16 @@ class Emitters:
             start, size = self.layout.starts[e], self.layout.sizes[e]
             a = adv[e]
             a[_k.A_SIZE] = size
-            for k, ts0, tspan in plan:
+            for k, ts0, tspan, at in plan:
                 skip = max(0, k - size)  # more than the whole ring at once: the excess never fits
                 k -= skip
                 a[_k.A_DROPPED] += skip
                 a[_k.A_SERIAL] += skip
                 if k:
                     rows.append((e, k, first, a[_k.A_HEAD], a[_k.A_SERIAL], start, size))
-                    vals.append((ts0, tspan, *pa, *pb, t0, h, *ev))
+                    # a burst placed by code: there, still (the emitter does not move)
+                    vals.append((ts0, tspan, *pa, *pb, t0, h, *ev) if at is None else
+                                (ts0, tspan, *at, *at, t0, h, 0.0, 0.0, 0.0))
                     first += k
                 a[_k.A_HEAD] += k
                 a[_k.A_SERIAL] += k
@@ -160,7 +221,7 @@ class Emitters:
                               min_speed, c, L.starts[c], L.sizes[c], count)
 
     def dropped_counts(self) -> np.ndarray:
-        return self.dropped.to_numpy()[: self.count]
+        return self.dropped.to_numpy()[: len(self.configs)]
 
     def emitted_counts(self) -> np.ndarray:
-        return self.emitter_emitted.to_numpy()[: self.count]
+        return self.emitter_emitted.to_numpy()[: len(self.configs)]

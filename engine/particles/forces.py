@@ -20,35 +20,26 @@ class Forces:
     it for its particles) and the per-emitter parameters of the terms in use. Gravity (m/s²,
     scaled per emitter by ``gravity_scale``) and wind (m/s) are the control's."""
 
-    def __init__(self, cfg, emitter_configs, state, emitter_drag, control):
-        E = len(emitter_configs)
+    def __init__(self, cfg, emitter_configs, state, emitter_drag, control, rows: int = 0):
+        """``rows``: per-emitter parameter rows (at least one per emitter; spare rows for
+        emitters added later by :meth:`set_emitters`)."""
+        self.rows = R = max(len(emitter_configs), int(rows))
         self.control = control
         self.force_drag = ti.field(ti.f32, shape=())
         self.force_drag[None] = cfg.drag
-        self.use_gravity = any(g != 0.0 for g in cfg.gravity) and any(
-            e.gravity_scale != 0 for e in emitter_configs)
-        self.emitter_gravity_scale = ti.field(ti.f32, shape=E)
-        self.emitter_gravity_scale.from_numpy(np.array([e.gravity_scale for e in emitter_configs], np.float32))
-        self.use_drag = cfg.drag > 0 or any((e.drag or 0.0) > 0 for e in emitter_configs)
-        # Only when some emitter sets its own drag (or gravity scale) does the kernel gather a
-        # per-emitter value by the particle's emitter id; otherwise the scene's value is used.
-        self.per_emitter_drag = any(e.drag is not None for e in emitter_configs)
-        self.per_emitter_gravity = any(e.gravity_scale != 1.0 for e in emitter_configs)
-        self.use_buoyancy = any(e.buoyancy != 0 for e in emitter_configs)
-        tb = cfg.turbulence
-        self.use_turbulence = tb.strength > 0 and any(e.turbulence > 0 for e in emitter_configs)
+        self.__dict__.update(self.features(cfg, emitter_configs))
         self.attractor_count, self.vortex_count = len(cfg.attractors), len(cfg.vortices)
         self._state, self._emitter_drag = state, emitter_drag
-        self.turbulence = tb
-        # per-emitter parameters of the optional terms, allocated only when the term is used
+        self.turbulence = cfg.turbulence
+        # per-emitter parameters; those of the optional terms allocated only when the term is used
+        self._params = {"emitter_gravity_scale": ti.field(ti.f32, shape=R)}
         if self.use_buoyancy:
-            self.emitter_buoyancy = ti.field(ti.f32, shape=E)
-            self.emitter_inv_cooling = ti.field(ti.f32, shape=E)
-            self.emitter_buoyancy.from_numpy(np.array([e.buoyancy for e in emitter_configs], np.float32))
-            self.emitter_inv_cooling.from_numpy(np.array([1.0 / e.cooling for e in emitter_configs], np.float32))
+            self._params["emitter_buoyancy"] = ti.field(ti.f32, shape=R)
+            self._params["emitter_inv_cooling"] = ti.field(ti.f32, shape=R)
         if self.use_turbulence:
-            self.emitter_turbulence = ti.field(ti.f32, shape=E)
-            self.emitter_turbulence.from_numpy(np.array([e.turbulence for e in emitter_configs], np.float32))
+            self._params["emitter_turbulence"] = ti.field(ti.f32, shape=R)
+        self.__dict__.update(self._params)
+        self.set_emitters(emitter_configs)
         if self.attractor_count:
             n = self.attractor_count
             self.attractor_pos = ti.Vector.field(3, ti.f32, shape=n)
@@ -67,6 +58,37 @@ class Forces:
                 ax = np.asarray(v.axis, np.float64)
                 self.vortex_pos[k], self.vortex_axis[k] = v.position, (ax / np.linalg.norm(ax)).tolist()
                 self.vortex_strength[k], self.vortex_radius[k] = v.strength, v.radius
+
+    @staticmethod
+    def features(cfg, emitter_configs) -> dict:
+        """The compile-time switches these emitters need (a term is compiled in only when used)."""
+        es = emitter_configs
+        tb = cfg.turbulence
+        return dict(
+            use_gravity=any(g != 0.0 for g in cfg.gravity) and any(e.gravity_scale != 0 for e in es),
+            use_drag=cfg.drag > 0 or any((e.drag or 0.0) > 0 for e in es),
+            # Only when some emitter sets its own drag (or gravity scale) does the kernel gather a
+            # per-emitter value by the particle's emitter id; otherwise the scene's value is used.
+            per_emitter_drag=any(e.drag is not None for e in es),
+            per_emitter_gravity=any(e.gravity_scale != 1.0 for e in es),
+            use_buoyancy=any(e.buoyancy != 0 for e in es),
+            use_turbulence=tb.strength > 0 and any(e.turbulence > 0 for e in es))
+
+    def covers(self, cfg, emitter_configs) -> bool:
+        """Whether the compiled terms serve these emitters (every switch they need is on)."""
+        need = self.features(cfg, emitter_configs)
+        return len(emitter_configs) <= self.rows and all(getattr(self, k) or not v for k, v in need.items())
+
+    def set_emitters(self, emitter_configs) -> None:
+        """Write the per-emitter parameters (rows past the emitters are zero); no compile."""
+        cols = {"emitter_gravity_scale": [e.gravity_scale for e in emitter_configs],
+                "emitter_buoyancy": [e.buoyancy for e in emitter_configs],
+                "emitter_inv_cooling": [1.0 / e.cooling for e in emitter_configs],
+                "emitter_turbulence": [e.turbulence for e in emitter_configs]}
+        for name, fld in self._params.items():
+            a = np.zeros(self.rows, np.float32)
+            a[: len(emitter_configs)] = cols[name]
+            fld.from_numpy(a)
 
     @property
     def names(self):

@@ -66,7 +66,7 @@ class ParticleIntegrator:
     (a point that ends a step inside a collider is put back on the surface and reflected: first
     order in h, the cheapest). Both hold contact at rest with the colliders' projection.
     ``quadratic``: the acceleration is constant over a step (gravity only): a plane's impact time
-    is a closed form. With ``contacts`` > 0 up to that many contacts per advance are recorded in
+    is a closed form. With ``contacts`` > 0 up to that many contacts between drains are recorded in
     ``contact_*`` fields (slot, collider, position, normal, impact speed, time: the located time
     and position of the step's fastest impact); without, the unused outputs are dead code. With
     ``events`` each step records in ``particle_event`` who died (bit 1) or hit a collider (bit 2,
@@ -80,7 +80,7 @@ class ParticleIntegrator:
         self.state, self.cap = state, state.capacity
         self.nonfinite_t = ti.field(ti.f32, shape=())
         self.err = ti.field(ti.f32, shape=())
-        self.hits = ti.field(ti.i32, shape=())
+        self.hits = ti.field(ti.i32, shape=())  # particle-steps with a contact (one record each)
         self.nonfinite_t[None] = NO_FAILURE
         self.has_colliders = colliders is not None and colliders.count > 0
         self.adaptive = bool(adaptive)
@@ -140,13 +140,11 @@ class ParticleIntegrator:
                 if stopped == 0:
                     nx, nv, n_in, kill_in, which, nrm, spd = self.colliders.project(x, v, x0, v0, h)
                     if n_in > 0:
-                        ti.atomic_add(self.hits[None], n_in)
                         if k < 0 or spd > speed:
                             k, lag, xh, nh, speed, dv = which, 0.0, nx, nrm, spd, (nv - v).norm()
                     x, v, killed = nx, nv, kill_in
-                if k >= 0:
-                    if ti.static(self.located):
-                        ti.atomic_add(self.hits[None], 1)
+                if k >= 0:  # one contact per particle and step: its fastest (records = hits)
+                    ti.atomic_add(self.hits[None], 1)
                     if ti.static(self.record):
                         c = ti.atomic_add(self.contact_count[None], 1)  # order fixed later by (time, slot)
                         if c < self.max_contacts:

@@ -22,23 +22,39 @@ from .capacity import emitter_capacity, pool_sizes  # noqa: F401  (re-exported)
 
 @dataclass
 class PoolLayout:
-    """Model: where each emitter's ring lives. ``starts[e]``, ``sizes[e]``, ``capacity`` total."""
+    """Model: where each emitter's ring lives. ``starts[e]``, ``sizes[e]``, ``capacity`` total;
+    ``spare`` slots after the rings, for emitters added later without reallocating (the
+    capacity, a compile-time constant of the kernels, stays)."""
 
     starts: List[int]
     sizes: List[int]
+    spare: int = 0
 
     @property
     def capacity(self) -> int:
-        return sum(self.sizes)
+        return sum(self.sizes) + self.spare
 
     @classmethod
-    def for_emitters(cls, emitters, frame_dt: float) -> "PoolLayout":
+    def for_emitters(cls, emitters, frame_dt: float, spare: int = 0) -> "PoolLayout":
         sizes = pool_sizes(emitters, frame_dt)
         starts, acc = [], 0
         for s in sizes:
             starts.append(acc)
             acc += s
-        return cls(starts, sizes)
+        return cls(starts, sizes, int(spare))
+
+    def take(self, size: int) -> None:
+        """A ring of ``size`` slots for a new emitter, from the spare slots."""
+        if size > self.spare:
+            raise ValueError(f"{size} slots wanted, {self.spare} spare")
+        self.starts.append(sum(self.sizes))
+        self.sizes.append(int(size))
+        self.spare -= int(size)
+
+    def drop_after(self, n: int) -> None:
+        """Give the rings of emitters n, n+1, ... back to the spare slots."""
+        self.spare += sum(self.sizes[n:])
+        del self.starts[n:], self.sizes[n:]
 
 
 # the per-slot state every pool has (optional ones are listed in ParticleState's docstring)
@@ -55,10 +71,13 @@ class ParticleState:
     ``particle_rand`` (f32 in [0, 1): per-particle variation for size and colour).
     With adaptive stepping, ``cand_pos``/``cand_vel`` hold the attempted step; with sub-emitters,
     ``particle_event``, ``particle_impact``, ``particle_impact_pos`` and ``particle_impact_lag``
-record deaths and collisions (each allocated only then).
+    record deaths and collisions (the last two: where and how long before the step's end it hit);
+    with ``interpolate``, ``particle_prev_pos`` (vec3 f32, m) holds where each particle was before
+    the last game step (NaN for a slot that was not alive then), what ``render(alpha=)`` draws from
+    (each allocated only then).
     """
 
-    def __init__(self, capacity: int, adaptive: bool, events: bool = False):
+    def __init__(self, capacity: int, adaptive: bool, events: bool = False, interpolate: bool = False):
         n = max(1, capacity)
         self.capacity = capacity
         vec3 = lambda: ti.Vector.field(3, ti.f32, shape=n)  # noqa: E731
@@ -74,3 +93,7 @@ record deaths and collisions (each allocated only then).
             self.particle_impact_lag = scalar(ti.f32)  # how long before the step's end it hit, s
         if adaptive:
             self.cand_pos, self.cand_vel = vec3(), vec3()
+        self.interpolate = bool(interpolate)
+        if interpolate:
+            self.particle_prev_pos = vec3()
+

@@ -14,13 +14,16 @@ import copy
 
 import numpy as np
 
+from ..contacts import Contacts, drain
 from ..ode.driver import Driver, StepPolicy
 from ..ode.methods import METHODS
 from . import integrate
 from .emitters import Emitters
 from .forces import Forces
 from .integrate import NO_FAILURE, ParticleIntegrator
-from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout
+from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout, pool_sizes
+from .slots import clear as clear_pool
+from .slots import save_positions
 
 H_MAX_FACTOR = 64  # an adaptive step may grow to 64 × the configured h
 MAX_RUN = 32  # fixed steps fused into one launch at most (a stop request waits for at most this many)
@@ -28,17 +31,21 @@ EVENT_TOL = 0.01  # an adaptive step locates impacts to 1% of atol from the surf
 
 
 class ParticleSystem:
-    def __init__(self, cfg, colliders, control, stats, contacts: int = 0):
-        self.cfg = cfg
+    def __init__(self, cfg, colliders, control, stats, contacts: int = 0, interpolate: bool = False,
+                 spare=(0, 0)):
+        """``spare``: (emitter rows, pool slots) allocated beyond the config's, so emitters can be
+        added between frames without new fields or compiles (:meth:`add_emitters`)."""
+        self.cfg = self._built = cfg
         sol = cfg.solver
         self.method, self.adaptive, self.stats = sol.integrator, sol.adaptive, stats
         self.label = f"integrator {self.method}"
         self.control = control
-        self.layout = PoolLayout.for_emitters(cfg.emitters, 1.0 / cfg.fps)
+        self.layout = PoolLayout.for_emitters(cfg.emitters, 1.0 / cfg.fps, spare[1])
+        rows = len(cfg.emitters) + int(spare[0])
         events = any(e.sub_emitters for e in cfg.emitters)
-        self.state = ParticleState(self.layout.capacity, self.adaptive, events)
-        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state)
-        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control)
+        self.state = ParticleState(self.layout.capacity, self.adaptive, events, interpolate)
+        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state, rows)
+        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control, rows)
         self.colliders = colliders
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), colliders,
                                              self.method, self.adaptive, sol.extrapolate,
@@ -56,11 +63,8 @@ class ParticleSystem:
         self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
 
     def advance(self, t: float, dt: float) -> None:
-        """Advance from t by dt seconds (any length), landing exactly on t + dt. Contacts recorded
-        are those of this advance."""
-        I = self.integrator
-        if I.record:
-            I.contact_count[None] = 0
+        """Advance from t by dt seconds (any length), landing exactly on t + dt. Contact records
+        accumulate until :meth:`contacts` drains them."""
         self._alive = None
         self.driver.advance(t, t + dt)
 
@@ -96,6 +100,7 @@ class ParticleSystem:
             else:
                 integrate.step_fixed_run(self.integrator, t0, h, j, k)
         self.emitters.emit_children()
+        self.emitters.carry_local(t, t0 + (j + k) * h)
         return k
 
     def attempt(self, t: float, h: float) -> float:
@@ -109,6 +114,7 @@ class ParticleSystem:
         if self.layout.capacity:
             integrate.commit(self.integrator, t, h)
         self.emitters.emit_children()
+        self.emitters.carry_local(t, t + h)
 
     def rollback(self) -> None:
         pass  # the trial sits in cand_pos / cand_vel until committed
@@ -121,6 +127,58 @@ class ParticleSystem:
         f[None] = NO_FAILURE
         return bad
 
+    # -- emitters added between frames ----------------------------------------------------------
+    def why_not_add(self, cfg):
+        """Why ``cfg`` (this scene's config with emitters appended) cannot take its new emitters
+        in place, or None: they need spare rows and slots, the compiled force terms and no
+        sub-emitter links."""
+        n, new = len(self.cfg.emitters), cfg.emitters[len(self.cfg.emitters):]
+        if cfg.model_copy(update={"emitters": list(self.cfg.emitters)}) != self.cfg:
+            return "the config changed elsewhere"
+        if len(cfg.emitters) > self.emitters.count:
+            return f"no spare emitter row ({self.emitters.count - n} spare)"
+        need = sum(pool_sizes(cfg.emitters, 1.0 / cfg.fps)[n:])
+        if need > self.layout.spare:
+            return f"its pool needs {need:,} slots, {self.layout.spare:,} spare"
+        if any(e.sub_emitters for e in new):
+            return "it has sub-emitters"
+        if not self.forces.covers(cfg.forces, cfg.emitters):
+            return "it needs a force term the scene did not compile"
+        return None
+
+    def add_emitters(self, cfg) -> None:
+        """Take the emitters ``cfg`` appends (checked by :meth:`why_not_add`; their inputs already
+        in the control): rings from the spare slots, parameters into spare rows. Writes fields
+        only: nothing is allocated or compiled."""
+        for size in pool_sizes(cfg.emitters, 1.0 / cfg.fps)[len(self.cfg.emitters):]:
+            self.layout.take(size)
+        self.emitters.set_configs(cfg.emitters)
+        self.forces.set_emitters(cfg.emitters)
+        self.cfg = cfg
+
+    def reset(self) -> None:
+        """Back to the state the build left (an empty pool at t = 0, the built emitters only),
+        keeping every field and compiled kernel: a scene reused for a level restart."""
+        if self.cfg is not self._built:
+            self.layout.drop_after(len(self._built.emitters))
+            self.emitters.set_configs(self._built.emitters)
+            self.forces.set_emitters(self._built.emitters)
+            self.cfg = self._built
+        clear_pool(self.state)
+        self.emitters.reset()
+        I = self.integrator
+        I.nonfinite_t[None] = NO_FAILURE
+        I.contact_count[None] = 0
+        I.hits[None] = 0
+        self.driver.reset()
+        self._alive, self._held = None, None
+
+    def save_positions(self) -> None:
+        """Keep where the particles are (``particle_prev_pos``) before a game step, for drawing
+        between the last two steps."""
+        if self.state.interpolate and self.layout.capacity:
+            save_positions(self.state)
+
     # -- read-back ----------------------------------------------------------------------------------
     def count_alive(self) -> int:
         """Live slots (particles not yet born this step included): one read-back per advance."""
@@ -131,17 +189,14 @@ class ParticleSystem:
     def dropped(self) -> int:
         return int(self.emitters.dropped_counts().sum())
 
-    def contacts(self):
-        """(collider, position, normal, speed, time, slot) arrays of the contacts recorded in the
-        last advance, sorted by time then pool slot, and how many did not fit the buffer."""
+    def contacts(self, names=()):
+        """Every contact recorded since the previous call (:class:`~engine.contacts.Contacts`,
+        sorted by time then pool slot; ``dropped``: those that did not fit the buffer); drains."""
         I = self.integrator
-        n = int(I.contact_count[None])
-        k = min(n, I.max_contacts)
-        slot = I.contact_slot.to_numpy()[:k]
-        tt = I.contact_time.to_numpy()[:k]
-        order = np.lexsort((slot, tt))  # deterministic, whatever order threads wrote them in
-        cols = (I.contact_collider, I.contact_pos, I.contact_normal, I.contact_speed)
-        return tuple(c.to_numpy()[:k][order] for c in cols) + (tt[order], slot[order]), max(0, n - k)
+        if not I.record:
+            return Contacts.empty(names)
+        return drain(I.contact_count, I.contact_slot, I.contact_collider, I.contact_pos, I.contact_normal,
+                     I.contact_speed, I.contact_time, I.max_contacts, names)
 
     def carry_from(self, old: "ParticleSystem") -> None:
         """Copy each named emitter's ring (particles, head, serial, clock) from ``old`` (the same

@@ -22,36 +22,23 @@ import taichi as ti
 from .background import build_background_kernel, copy_background, downsample_depth
 from .binning import build_binning_kernels, chunks_for
 from .composite import build_composite_kernels
+from .resolution import particle_scale
 from .sprites import Look, SpriteRecords, build_sprite_kernel
 from .targets import FrameTargets, packed_view
 
 SCHEDULES = ("tiles", "pixels")
 RESOLUTIONS = {"auto": None, "1": 1.0, "0.5": 0.5, "0.25": 0.25}
-# "auto": no reduced buffer below 360 rows, ½ up to 720, ¼ from 720 (sprites there are ≥ 8 px)
-AUTO_SCALES = ((360, 1.0), (720, 0.5))
-
-
 def _arch_is_cpu() -> bool:
     from taichi.lang import impl
 
     return impl.current_cfg().arch in (ti.x64, ti.arm64)
 
 
-def particle_scale(setting, height: int) -> float:
-    """The reduced buffer's scale for ``[render] particle_resolution`` at an image height."""
-    if setting in (None, "auto"):
-        for below, scale in AUTO_SCALES:
-            if height < below:
-                return scale
-        return 0.25
-    return float(setting)
-
-
 class Renderer:
     """Draws one scene. ``state``/``emitter_configs`` may be None/empty (a soft-body scene: no
     sprite kernels are built); ``bodies`` are drawn as meshes and lines."""
 
-    def __init__(self, state, emitter_configs, colliders, render_cfg, bodies=(), schedule=None):
+    def __init__(self, state, emitter_configs, colliders, render_cfg, bodies=(), schedule=None, rows: int = 0):
         self.cfg = render_cfg
         self.shading = float(render_cfg.density_shading)
         self.colliders = colliders
@@ -64,7 +51,7 @@ class Renderer:
         self._background = build_background_kernel(render_cfg, colliders)
         uses_add = uses_alpha = False
         if self.has_particles:
-            self.look = Look(emitter_configs)
+            self.look = Look(emitter_configs, rows)  # (rows: spare emitter rows, engine.api add_emitter)
             uses_add, uses_alpha = self.look.uses_additive, self.look.uses_alpha
             self.records = SpriteRecords(state.capacity)
             self._sprites = build_sprite_kernel(state, self.look, self.records)
@@ -100,11 +87,13 @@ class Renderer:
 
     # -- a frame ------------------------------------------------------------------------------
     def render(self, camera, width=None, height=None, *, out=None, exposure=None, show_colliders=None,
-               transparent=False, bgra=False) -> np.ndarray:
+               transparent=False, bgra=False, blend=1.0) -> np.ndarray:
         """The scene seen by ``camera`` as an (H, W, 4) uint8 RGBA image (``out`` if given: a
         C-contiguous uint8 array of that shape, written in place; else a new array). Opaque
         unless ``transparent``: then premultiplied, alpha 0 where only background would show.
-        ``bgra``: bytes in B, G, R, A order (what X11, SDL and Taichi's fast GUI blit directly)."""
+        ``bgra``: bytes in B, G, R, A order (what X11, SDL and Taichi's fast GUI blit directly).
+        ``blend``: where between the last two game steps particles are drawn (a pool built with
+        ``interpolate``; engine.render.sprites)."""
         W = int(width or self.cfg.width)
         H = int(height or self.cfg.height)
         image = out if out is not None else np.empty((H, W, 4), np.uint8)
@@ -132,7 +121,7 @@ class Renderer:
             bgc, dep = t.fbg, t.fdep
         if t.has_lo and (redrawn or self.mesh is not None):
             downsample_depth(dep, W, H, t.Wl, t.Hl, round(1 / t.scale))
-        has_lo = self._splat(t, cam, dep) if self.has_particles else 0
+        has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:
             self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale)
@@ -144,12 +133,12 @@ class Renderer:
                                         dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)
         return image
 
-    def _splat(self, t: FrameTargets, cam, dep) -> int:
+    def _splat(self, t: FrameTargets, cam, dep, blend: float = 1.0) -> int:
         """Sprites, binning, and the splat (per tile: both levels; per pixel: the reduced level,
         the full one is splatted in the composite); returns whether the reduced level is used."""
         W, H = t.W, t.H
         lo_min = 2.0 / t.scale if t.has_lo else 1e30  # a reduced sprite is at least 2 texels wide
-        self._sprites(*cam, W, H, t.scale, lo_min)
+        self._sprites(*cam, W, H, t.scale, lo_min, float(blend))
         self._count(t.hist, t.T, t.T0, t.TX, t.TXl)
         self._offsets(t.hist, t.tile_count, t.block_sum, t.T, t.NB)
         total = int(self._starts(t.tile_count, t.tile_start, t.block_sum, t.T, t.NB))

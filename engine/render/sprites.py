@@ -49,25 +49,43 @@ class Look:
     per frame cost more than the projection); ``emitter_additive`` (i32), ``emitter_streak`` (f32,
     s of motion blur), ``emitter_size_rand``."""
 
-    def __init__(self, emitter_configs):
-        E = len(emitter_configs)
+    def __init__(self, emitter_configs, rows: int = 0):
+        """``rows``: emitter rows (spare ones for emitters added later: :meth:`update`)."""
+        self.rows = R = max(len(emitter_configs), int(rows))
+        self.look_table = ti.Vector.field(8, ti.f32, shape=(R, LOOK_SAMPLES + 1))
+        self.emitter_additive = ti.field(ti.i32, shape=R)
+        self.emitter_streak = ti.field(ti.f32, shape=R)
+        self.emitter_size_rand = ti.field(ti.f32, shape=R)
+        self.update(emitter_configs)
+        self.uses_alpha = any(c.blend == "alpha" for c in emitter_configs)
+        self.uses_additive = any(c.blend == "additive" for c in emitter_configs)
+
+    def covers(self, emitter_configs) -> bool:
+        """Whether the compiled blend modes and rows serve these emitters."""
+        return len(emitter_configs) <= self.rows and all(
+            self.uses_alpha if c.blend == "alpha" else self.uses_additive for c in emitter_configs)
+
+    def update(self, emitter_configs) -> None:
+        """Bake every emitter's ramps and write the fields (rows past the emitters are zero)."""
+        R = self.rows
         t = np.linspace(0.0, 1.0, LOOK_SAMPLES + 1)
-        table = np.zeros((E, LOOK_SAMPLES + 1, 8), np.float32)
+        table = np.zeros((R, LOOK_SAMPLES + 1, 8), np.float32)
         for e, c in enumerate(emitter_configs):
             for col, (ramp, comp) in enumerate([(c.color, 1), (c.color, 2), (c.color, 3), (c.alpha, 1),
                                                 (c.size, 1)]):
                 stops = np.asarray(ramp, np.float64)
                 table[e, :, col] = np.interp(t, stops[:, 0], stops[:, comp])  # flat outside
-        self.look_table = ti.Vector.field(8, ti.f32, shape=(E, LOOK_SAMPLES + 1))
         self.look_table.from_numpy(table)
-        self.emitter_additive = ti.field(ti.i32, shape=E)
-        self.emitter_streak = ti.field(ti.f32, shape=E)
-        self.emitter_size_rand = ti.field(ti.f32, shape=E)
-        self.emitter_additive.from_numpy(np.array([int(c.blend == "additive") for c in emitter_configs], np.int32))
-        self.emitter_streak.from_numpy(np.array([c.streak for c in emitter_configs], np.float32))
-        self.emitter_size_rand.from_numpy(np.array([c.size_randomness for c in emitter_configs], np.float32))
-        self.uses_alpha = any(c.blend == "alpha" for c in emitter_configs)
-        self.uses_additive = any(c.blend == "additive" for c in emitter_configs)
+
+        def rows(values, dtype):
+            a = np.zeros(R, dtype)
+            a[: len(values)] = values
+            return a
+
+        cs = emitter_configs
+        self.emitter_additive.from_numpy(rows([int(c.blend == "additive") for c in cs], np.int32))
+        self.emitter_streak.from_numpy(rows([c.streak for c in cs], np.float32))
+        self.emitter_size_rand.from_numpy(rows([c.size_randomness for c in cs], np.float32))
 
     def make_func(self):
         """``look_at(e, t)`` → vec8 (R, G, B, alpha, size) of emitter e at normalised life t."""
@@ -97,10 +115,13 @@ class SpriteRecords:
 
 
 def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
-    """``sprites(o, f, r, u, th, W, H, lo_scale, lo_min_rad)``: every slot of the pool → its sprite
-    record. (o, f, r, u) is the camera's position and basis, th the tangent of half the vertical
-    field of view, W×H the image; sprites of full-resolution radius ≥ ``lo_min_rad`` px go to the
-    level-1 buffer of ``lo_scale``·W × ``lo_scale``·H (``lo_scale`` 1: everything at level 0)."""
+    """``sprites(o, f, r, u, th, W, H, lo_scale, lo_min_rad, blend)``: every slot of the pool → its
+    sprite record. (o, f, r, u) is the camera's position and basis, th the tangent of half the
+    vertical field of view, W×H the image; sprites of full-resolution radius ≥ ``lo_min_rad`` px go
+    to the level-1 buffer of ``lo_scale``·W × ``lo_scale``·H (``lo_scale`` 1: everything at level
+    0). A pool that keeps ``particle_prev_pos`` (``interpolate``) is drawn at
+    prev + blend·(pos − prev) (Fiedler, "Fix Your Timestep!": the fixed-step clock's alpha), a
+    particle without a previous position (NaN: born since) where it is; otherwise blend is unused."""
     S = state
     cap = S.capacity
     pos, vel, age, life, alive, pem, prand = (
@@ -109,18 +130,25 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
     look_at = look.make_func()
     additive, streak, size_rand = look.emitter_additive, look.emitter_streak, look.emitter_size_rand
     uses_alpha = look.uses_alpha
+    interp = getattr(S, "interpolate", False)
+    prev = S.particle_prev_pos if interp else pos
     geom, slook, tail, info, tiles, soft = (rec.spr_geom, rec.spr_look, rec.spr_tail, rec.spr_info,
                                             rec.spr_tiles, rec.spr_soft)
 
     @ti.kernel
     def sprites(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32, H: ti.i32,
-                lo_scale: ti.f32, lo_min_rad: ti.f32):
+                lo_scale: ti.f32, lo_min_rad: ti.f32, blend: ti.f32):
         for i in range(cap):
             nsub = 0
             if alive[i] != 0 and age[i] >= 0.0:  # (negative age: born later in this step)
                 e = pem[i]
                 tl = ti.min(1.0, age[i] / life[i])
-                dpos = pos[i] - o
+                x = pos[i]
+                if ti.static(interp):
+                    q = prev[i]
+                    if q[0] == q[0]:  # not NaN: it was alive before the last step
+                        x = q + blend * (x - q)
+                dpos = x - o
                 z = dpos.dot(f)
                 if z > 0.05:
                     lk = look_at(e, tl)
@@ -146,7 +174,7 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
                     tx, ty = cx, cy
                     nsub = 1
                     if is_streak:
-                        tpos = pos[i] - vel[i] * streak[e] - o
+                        tpos = x - vel[i] * streak[e] - o
                         st_scale = 0.5 * H / (ti.max(tpos.dot(f), 0.05) * th)
                         tx = (tpos.dot(r) * st_scale + 0.5 * W) * s
                         ty = (0.5 * H - tpos.dot(u) * st_scale) * s

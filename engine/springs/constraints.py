@@ -67,7 +67,12 @@ class NodeContacts:
 
 @ti.kernel
 def finalize(model: ti.template(), state: ti.template(), contacts: ti.template(), x0: ti.template(),
-             v0: ti.template(), bad_t: ti.template(), alpha: ti.f64, t_end: ti.f64, h: ti.f64):
+             v0: ti.template(), bad_t: ti.template(), alpha: ti.f64, t_end: ti.f64, h: ti.f64,
+             log: ti.template()):
+    """Pins, located impacts and held contacts of every node after a step of h ending at t_end
+    that started from (``x0``, ``v0``). ``log``: an :class:`engine.contacts.ContactBuffer`
+    (recording compiled in only when it is enabled): the step's fastest impact of each node, at
+    its located time and position (a held contact's at the step's end)."""
     X, V = ti.static(state.node_pos, state.node_vel)
     for i in range(model.node_count):
         x, v = X[i], V[i]
@@ -80,14 +85,18 @@ def finalize(model: ti.template(), state: ti.template(), contacts: ti.template()
                 xs, vs, xa, va = ti.cast(x, dt), ti.cast(v, dt), ti.cast(x0[i], dt), ti.cast(v0[i], dt)
                 acc = 2.0 * (xs - xa - hh * va) / (hh * hh)
                 y0 = ti.Vector([xa[0], xa[1], xa[2], acc[0], acc[1], acc[2], va[0], va[1], va[2], 0.0, 0.0, 0.0], dt=dt)
-                y, _err, count, _k, _lag, _xh, _n, _s, _dv, _stop = contacts.locate(
+                y, _err, count, which, lag, xh, nh, speed, _dv, _stop = contacts.locate(
                     y0, ti.cast(t_end - h, dt), hh, i, 1.0, 1.0, 0.0)
                 if count > 0:
                     xs, vs = ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[6], y[7], y[8]])
-                xc, vc, hits, _killed, _which, _nrm, _speed = contacts.colliders.project(xs, vs, xa, va, hh)
+                xc, vc, hits, _killed, which_p, n_p, speed_p = contacts.colliders.project(xs, vs, xa, va, hh)
+                if hits > 0 and (count == 0 or speed_p > speed):
+                    which, lag, xh, nh, speed = which_p, 0.0, xc, n_p, speed_p
                 if count > 0 or hits > 0:
                     x = ti.cast(xc, model.dtype)
                     v = ti.cast(vc, model.dtype)
+                    if ti.static(log.enabled):
+                        log.record(i, which, xh, ti.cast(nh, ti.f32), ti.cast(speed, ti.f32), t_end - lag)
         if not is_finite(x.sum() + v.sum()):
             ti.atomic_min(bad_t[None], t_end)
         X[i] = x

@@ -19,6 +19,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from ..contacts import ContactBuffer
 from ..control import ColliderInput, Control
 from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
@@ -43,9 +44,11 @@ class SpringSystem:
                  tol: float = 1e-4, rtol=None, atol=None, accumulate: str = "gather",
                  xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 2,
                  check_stability: bool = True, dtype=ti.f32, record_energy: bool = False,
-                 control: Control = None, name: str = ""):
+                 control: Control = None, name: str = "", contacts: int = 0):
         """``control``: the scene's inputs (gravity, collider positions); without one the system
-        has its own, with ``gravity`` and the colliders' own paths. ``name`` prefixes messages."""
+        has its own, with ``gravity`` and the colliders' own paths. ``name`` prefixes messages.
+        ``contacts``: keep up to this many node–collider contact records between drains
+        (:meth:`contacts`; 0: none, and no recording is compiled)."""
         ensure_init()
         if integrator not in INTEGRATORS:
             raise ValueError(f"integrator: unknown value {integrator!r}; allowed: {', '.join(INTEGRATORS)}")
@@ -83,6 +86,7 @@ class SpringSystem:
         if self._contacts.on:  # the start of each step, for locating impacts in it
             self._x0 = ti.Vector.field(3, dtype, max(1, n))
             self._v0 = ti.Vector.field(3, dtype, max(1, n))
+        self.contact_log = ContactBuffer(contacts if self._contacts.on else 0)
         self._bad = ti.field(ti.f64, ())
         self._bad[None] = constraints.NO_FAILURE
         self._limits = DistanceLimits(self.model, self.state) if max_stretch is not None else None
@@ -151,7 +155,7 @@ class SpringSystem:
             self.colliders.move_to(t_end, ctl.collider_positions(t_end),
                                    since=(t_end - h, ctl.collider_positions(t_end - h)))
         constraints.finalize(self.model, self.state, self._contacts, x0, v0, self._bad,
-                             self._alpha(t_end), t_end, h)
+                             self._alpha(t_end), t_end, h, self.contact_log)
 
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
         t = t0 + j * h
@@ -204,6 +208,26 @@ class SpringSystem:
 
     def set_velocities(self, v) -> None:
         self.state.node_vel.from_numpy(self._padded(np.asarray(v).reshape(-1, 3)))
+
+    def reset(self) -> None:
+        """Back to the topology's rest state at time 0 with its own pins (a reused scene)."""
+        top, model = self.top, self.model
+        self.set_positions(top.positions)
+        self.set_velocities(np.zeros_like(top.positions))
+        home = np.zeros(top.node_count, bool)
+        home[top.pinned] = True
+        for node in np.flatnonzero(home != model.pinned_mask):
+            model.set_pinned(int(node), bool(home[node]))
+        p = self._padded(top.positions)
+        model.pin_start.from_numpy(p)
+        model.pin_target.from_numpy(p)
+        self._pins_changed()
+        if self.colliders is not None:
+            self.colliders.reset()
+        self._bad[None] = constraints.NO_FAILURE
+        self.contact_log.count[None] = 0
+        self.driver.reset()
+        self.time, self._frame, self.energy_log = 0.0, (0.0, 1.0), []
 
     def pin(self, node: int, target=None) -> None:
         """Hold ``node`` at ``target`` (default: where it is now)."""

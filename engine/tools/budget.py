@@ -5,9 +5,10 @@ flag that raises it.
 Memory is the Taichi fields a scene allocates (particle pool, tiled-splat records, render targets,
 spring networks) plus the frames in flight to the encoders; work is integrator steps, and steps ×
 elements (particle slots + spring nodes). The per-element byte counts are read off the field
-definitions (engine/particles/pool.py, engine/render/raster.py and tiles.py, engine/springs/);
-tests/test_budget.py builds real scenes and checks the estimate against the fields they allocate,
-so a renderer or pool that grows fails that test rather than the budget going stale.
+definitions (engine/particles/pool.py, engine/render/sprites.py and targets.py, engine/springs/);
+tests/test_budget.py builds and renders real scenes and checks the estimate against the fields
+and ndarrays they allocate, so a renderer or pool that grows fails that test rather than the
+budget going stale.
 """
 from __future__ import annotations
 
@@ -16,15 +17,19 @@ import re
 from dataclasses import dataclass
 
 from ..particles.capacity import pool_sizes
+from ..render.resolution import particle_scale
 
 # Particle state per slot (ParticleState): pos, vel (vec3 f32), age, life, rand (f32), alive,
 # emitter (i32) = 44 B; sub-emitter events + 8 B; adaptive candidates (two vec3 f32) + 24 B.
 PARTICLE_BYTES, EVENT_BYTES, ADAPTIVE_BYTES = 44, 8, 24
-# Tiled splat per slot: six sprite records (76 B) and 1.5 tile pairs of 64 B each.
-SPRITE_BYTES = 76 + 96
-# Render targets per pixel: u8 RGB image, additive light, OIT colour, weight, log-transmittance,
-# background colour and depth (f32).
-PIXEL_BYTES = 3 + 12 + 12 + 4 + 4 + 12 + 4
+# Sprites per slot (engine/render/sprites.py): geometry, look, tail, info, tiles (vec4 each) and
+# the soft distance = 84 B, and 1.5 tile pairs of 64 B (at least 2^14 pairs per image size).
+SPRITE_BYTES, PAIR_BYTES, MIN_PAIRS = 84, 64, 1 << 14
+# Render targets per pixel (engine/render/targets.py): background colour + coverage (vec4),
+# depth, packed background, the two splat accumulators (vec4 each) = 56 B; per reduced-layer
+# texel depth and accumulators (36 B) and 16 B per pixel for the layer's rows; soft bodies add a
+# visibility key, line sums, the frame's background and depth (44 B).
+PIXEL_BYTES, TEXEL_BYTES, MESH_PIXEL_BYTES = 56, 36, 44
 # Spring networks (f32): per node mass, pins, position, velocity, RK stages (up to 4), adaptive
 # copies and the mesh layer; per spring endpoints, rest length, ks, kd, adjacency, colour, XPBD λ.
 NODE_BYTES, SPRING_BYTES = 256, 64
@@ -102,7 +107,14 @@ def estimate(cfg, width: int, height: int, frames_in_flight: int, body_substeps=
     parts["bodies"] = sum(n * (NODE_BYTES + SPRINGS_PER_NODE[b.type] * SPRING_BYTES)
                           for n, b in zip(nodes, cfg.bodies))
     pixels = width * height
-    parts["render targets"] = pixels * PIXEL_BYTES
+    scale = 1.0
+    if slots:
+        scale = particle_scale(cfg.render.particle_resolution, height)
+    texels = math.ceil(width * scale) * math.ceil(height * scale) if scale < 1 else 0
+    rows = math.ceil(height * scale) * width if scale < 1 else 0
+    parts["sprites"] += max(MIN_PAIRS, int(1.5 * slots)) * PAIR_BYTES if slots else 0
+    parts["render targets"] = (pixels * PIXEL_BYTES + texels * TEXEL_BYTES + rows * 16
+                               + (pixels * MESH_PIXEL_BYTES if cfg.bodies else 0))
     parts["frames in flight"] = pixels * 4 * frames_in_flight
     # Steps: fixed steps are exact (equal substeps landing on each frame); adaptive runs start at
     # h and the controller may grow it, so h is the estimate's step there too.

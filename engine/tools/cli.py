@@ -12,7 +12,7 @@ import sys
 
 from . import budget, flags
 from .errors import EXIT_BROKEN_PIPE, EXIT_OK, SimulationError, UserError
-
+from .wedge import add_parser as add_wedge_parser
 
 ODE_MAX_STEPS = 10_000_000  # fixed steps run inside one kernel per output interval
 
@@ -127,7 +127,8 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
     b.add_argument("--quick", action="store_true", help="small sizes (CI: well under a minute)")
     b.add_argument("--only", default=None,
-                   help="comma-separated sections: step, frame, effects, ode, startup, features, cloth, output")
+                   help="comma-separated sections: step, frame, effects, ode, startup, features, "
+                        "cloth, output, wedge")
     b.add_argument("--quiet", action="store_true", help="no progress display")
     b.set_defaults(func=_cmd_bench)
 
@@ -153,6 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="image size WxH (default 1280x720)")
     pr.add_argument("--frames", type=T(flags.integer(1, 10_000)), default=20)
     pr.set_defaults(func=_cmd_profile, kernel_profiler=True)
+
+    add_wedge_parser(sub)
 
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
     g.add_argument("--out", default=os.path.join("renders", "gallery"), type=T(flags.path))

@@ -5,7 +5,11 @@ bandwidth limit), ``frame`` (a full 1M-particle frame), ``effects`` (every shipp
 runs it, and an empty scene's fixed frame cost), ``ode`` (adaptive RK4 against scipy's
 RK45 at equal error), ``startup`` (cold and warm ``particles run``), ``features`` (the cost of each
 optional feature and proof that an unused one compiles nothing), ``cloth`` (when
-``engine.springs`` exists), ``output`` (``particles run``'s frame rate against sim + render). ``quick`` uses small sizes so CI can run it in seconds.
+``engine.springs`` exists), ``output`` (``particles run``'s frame rate against sim + render),
+``wedge`` (``particles wedge`` on local Dask workers against the same variants run one after
+another), ``api`` (the game API's level restart, memory over build/discard cycles, add_emitter, a
+new render size, the cost of its argument checks). ``quick`` uses small sizes so CI can run it in
+seconds.
 """
 from __future__ import annotations
 
@@ -15,9 +19,11 @@ import time
 
 from .common import Row, format_table
 
-SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output")
+SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output", "wedge",
+            "api")
 _MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy",
-            "startup": "startup", "features": "features", "cloth": "cloth", "output": "output"}
+            "startup": "startup", "features": "features", "cloth": "cloth", "output": "output",
+            "wedge": "wedge", "api": "api"}
 
 
 def run(quick: bool = False, only=None, echo=None, quiet: bool = True):

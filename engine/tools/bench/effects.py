@@ -72,7 +72,7 @@ def run(quick: bool = False, configs=None):
     frames = 5 if quick else 40
     paths = configs or sorted(glob.glob(os.path.join(CONFIGS, "*.toml")))
     if quick:
-        paths = [p for p in paths if os.path.basename(p) in ("sparks.toml", "smoke.toml")]
+        paths = [p for p in paths if os.path.basename(p) == "sparks.toml"]
     sec = f"effects at {w}x{h}: step(1/60) + render, as a game runs them"
     rows = []
     worst = None

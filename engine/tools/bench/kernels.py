@@ -15,3 +15,17 @@ def stream_rmw(pos: ti.template(), vel: ti.template(), age: ti.template(), life:
         vel[i] = vel[i] * a + b
         age[i] = age[i] * a + b
         life[i] = life[i] * a + b
+
+
+@ti.kernel
+def scale_field(x: ti.template(), a: ti.f32):
+    """x *= a over a field: specialised (compiled) once per field it is given."""
+    for i in x:
+        x[i] *= a
+
+
+@ti.kernel
+def scale_ndarray(x: ti.types.ndarray(dtype=ti.f32, ndim=1), a: ti.f32):
+    """x *= a over an ndarray: compiled once per dtype and rank, whatever array it is given."""
+    for i in x:
+        x[i] *= a
