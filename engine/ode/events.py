@@ -43,6 +43,7 @@ from .steppers import is_finite, scaled_error
 
 MAX_EVENTS = 4  # located impacts per element per step
 NEWTON_ITERATIONS = 8  # per root; from the secant start a plane or a sphere needs 2–4
+PASS_SAMPLES = 8  # a step outside at both ends that could pass through a surface: looked at every span/8
 EPS_BAND = 16  # |g| within EPS_BAND × machine epsilon × (1 + |x|) of the surface: touching (rounding)
 
 
@@ -115,9 +116,10 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
     n_fn = events.count  # event functions (compile time)
 
     @ti.func
-    def root(k: ti.template(), xa, va, xb, vb, span, start, glo, gdlo, gb, N, tol_g):
-        """Offset in [start, span] of the crossing of contact k between (xa, va) at 0 and (xb, vb)
-        at span, bracketed by g(start) = glo > 0 (ġ there gdlo) and g(span) = gb < 0."""
+    def root(k: ti.template(), xa, va, xb, vb, span, start, glo, gdlo, end, gend, N, tol_g):
+        """Offset in [start, end] ⊆ [0, span] of the crossing of contact k on the path between
+        (xa, va) at 0 and (xb, vb) at span, bracketed by g(start) = glo > 0 (ġ there gdlo) and
+        g(end) = gend < 0."""
         lo = ti.cast(start, dtype)
         tau = ti.cast(-1.0, dtype)
         if ti.static(quadratic and events.linear(k)):
@@ -127,9 +129,9 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
                 den = ti.sqrt(disc) - gdlo
                 if den > 0.0:
                     tau = lo + 2.0 * glo / den  # the first root of g₀ + ġ₀τ + ½g̈τ² (no cancellation)
-        if not (tau >= lo and tau <= span):
-            hi = span
-            tau = lo + (span - lo) * glo / (glo - gb)  # secant start inside the bracket
+        if not (tau >= lo and tau <= end):
+            hi = ti.cast(end, dtype)
+            tau = lo + (hi - lo) * glo / (glo - gend)  # secant start inside the bracket
             it = 0
             while it < NEWTON_ITERATIONS:
                 x, xd = hermite(xa, va, xb, vb, span, tau)
@@ -156,19 +158,36 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
         """Offset of the first crossing of contact k into its surface within [0, span], or −1.
         A point touching the surface at the start (within the rounding band) is held when it
         does not move away; moving away, it is looked for again where ġ's secant vanishes (the
-        top of its hop): a bounce that lands again within the step."""
+        top of its hop): a bounce that lands again within the step. A point outside at both ends
+        whose path is long enough to reach the surface is sampled at PASS_SAMPLES − 1 points: a
+        long step through a sphere's cap is not missed because both its ends are outside (a
+        graze shallower than the samples' spacing can be)."""
         tau = ti.cast(-1.0, dtype)
         ga, gda, N = events.contact(k, xa, va, span)
         gb, gdb, _Nb = events.contact(k, xb, vb, 0.0)
         if gb < 0.0:
             if ga > band(xa):
-                tau = root(k, xa, va, xb, vb, span, 0.0, ga, gda, gb, N, tol_g)
+                tau = root(k, xa, va, xb, vb, span, 0.0, ga, gda, span, gb, N, tol_g)
             elif gda > 0.0 and gdb < 0.0:
                 top = span * gda / (gda - gdb)
                 x, xd = hermite(xa, va, xb, vb, span, top)
                 gt, gdt, _Nt = events.contact(k, x, xd, span - top)
                 if gt > band(x):
-                    tau = root(k, xa, va, xb, vb, span, top, gt, gdt, gb, N, tol_g)
+                    tau = root(k, xa, va, xb, vb, span, top, gt, gdt, span, gb, N, tol_g)
+        elif ga > band(xa) and span * ti.max(va.norm(), vb.norm()) > ga + gb:
+            # outside at both ends, but the path is long enough to reach the surface (g is
+            # 1-Lipschitz in x; |v| is largest at an end of a constant-acceleration step)
+            s0, g0, gd0 = ti.cast(0.0, dtype), ga, gda
+            j = 1
+            while j < PASS_SAMPLES:
+                sj = span * j / PASS_SAMPLES
+                x, xd = hermite(xa, va, xb, vb, span, sj)
+                gj, gdj, _Nj = events.contact(k, x, xd, span - sj)
+                if gj < 0.0:
+                    tau = root(k, xa, va, xb, vb, span, s0, g0, gd0, sj, gj, N, tol_g)
+                    j = PASS_SAMPLES
+                s0, g0, gd0 = sj, gj, gdj
+                j += 1
         return tau
 
     @ti.func
