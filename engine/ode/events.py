@@ -35,13 +35,15 @@ retried shorter, so the tolerance bounds the bounce as it bounds the flight.
 An event set (duck-typed; :class:`engine.colliders.Colliders` is one) has ``count`` and ``dtype``,
 ``linear(k)`` and ``stops(k)`` (compile-time answers), ``contact(k, x, xd, lag) -> (g, ġ, N)``
 (``lag``: seconds before the step's end: a moving surface is placed where it is then) and
-``respond(k, x, v, lag, dv) -> (x', v', speed, N)``.
+``respond(k, x, v, lag, dv) -> (x', v', speed, N)`` and ``project(x, v, x0, v0, h) -> (x', v', hits,
+killed, k, N, speed)`` (held contact at the step's end, :meth:`engine.colliders.Colliders.project`).
 """
 import taichi as ti  # (no __future__ annotations: Taichi reads the funcs' annotations)
 
 from .steppers import is_finite, scaled_error
 
 MAX_EVENTS = 4  # located impacts per element per step
+EXHAUSTED = 1e3  # the error of a step that ends inside a surface after MAX_EVENTS impacts: retried shorter
 NEWTON_ITERATIONS = 8  # per root; from the secant start a plane or a sphere needs 2–4
 PASS_SAMPLES = 8  # a step outside at both ends that could pass through a surface: looked at every span/8
 EPS_BAND = 16  # |g| within EPS_BAND × machine epsilon × (1 + |x|) of the surface: touching (rounding)
@@ -218,10 +220,18 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
                 xr, vr = xe, ve
                 for k in ti.static(range(n_fn)):
                     if k == first:
-                        miss, _gd, _N = events.contact(k, xe, ve, span - best)
+                        miss, _gd, Ne = events.contact(k, xe, ve, span - best)
                         off = ti.max(ti.abs(miss) - band(xe), 0.0)
                         err = ti.max(err, off / (atol + rtol * xe.norm()))
-                        xr, vr, speed, N = events.respond(k, xe, ve, span - best, zero)
+                        # rest (the Zeno tail's end): a rebound whose hop would rise less than
+                        # tol_g under the piece's mean acceleration a is not bounced: the event
+                        # set rests when e|v_n| ≤ −N·dv, with dv = a·t_rest, t_rest = √(2 tol_g/|N·a|)
+                        acc = (vb - va) / span
+                        a_n = Ne.dot(acc)
+                        dv_rest = zero
+                        if a_n < 0.0:
+                            dv_rest = acc * ti.sqrt(2.0 * tol_g / -a_n)
+                        xr, vr, speed, N = events.respond(k, xe, ve, span - best, dv_rest)
                         if speed > rec_speed:
                             rec_k, rec_lag, rec_x, rec_n = k, span - best, xr, N
                             rec_speed, rec_dv = speed, (vr - ve).norm()
@@ -235,6 +245,18 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
                 else:
                     yb, err_b = step(ya, t + s, h - s, i, atol, rtol)  # finish the step from there
                     err = ti.max(err, err_b)
+        if searching != 0:  # MAX_EVENTS located and the rest of the step not looked at:
+            xb = point(yb)  # ending inside a surface, it is retried shorter (adaptive steps)
+            for k in ti.static(range(n_fn)):
+                gb, _gdb, _Nb = events.contact(k, xb, velocity(yb), 0.0)
+                if gb < -band(xb):
+                    err = ti.max(err, EXHAUSTED)
+        if stopped == 0:  # contact held: the event set's projection from the last piece's start
+            # (a point that rested at its last event and sank back in under gravity is held
+            # there, not bounced with the speed it gained inside)
+            xp, vp, hits, _kill, _w, _np, _sp = events.project(point(yb), velocity(yb), point(ya), velocity(ya), h - s)
+            if hits > 0:
+                yb = placed(yb, xp, vp)
         return yb, err, count, rec_k, rec_lag, rec_x, rec_n, ti.max(rec_speed, 0.0), rec_dv, stopped
 
     return run
