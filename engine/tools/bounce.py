@@ -173,3 +173,33 @@ def reference(scene: str, drag: bool, t_end: float = T_END) -> np.ndarray:
 def position_error(r, scene: str, drag: bool) -> float:
     """Max-norm position error (m) of a solve result's last state against the reference."""
     return float(np.abs(r.y[:3, -1] - reference(scene, drag, float(r.t[-1]))[:3]).max())
+
+
+def particle_scene(scene: str, drag: bool, solver: dict, contacts: bool = False, fps: int = 60):
+    """The same ball as one particle of a :class:`engine.api.ParticleScene` (float32), with the
+    scene's ``solver`` table (e.g. ``{"integrator": "rk4", "h": 1/240, "impacts": "projected"}``)."""
+    from ..builder import SceneBuilder
+
+    sc = SCENES[scene]
+    b = (SceneBuilder(seed=1, fps=fps).solver(**solver)
+         .forces(gravity=[0.0, -G, 0.0], drag=DRAG if drag else 0.0)
+         .emitter(name="ball", shape="point", position=list(sc.y0[:3]), speed=[0.0, 0.0], lifetime=100.0,
+                  bursts=[{"time": 0.0, "count": 1}], rate=0.0))
+    for k, (kind, point, extra) in enumerate(sc.specs):
+        if kind == "plane":
+            b = b.collider(type="plane", name=f"c{k}", point=list(point), normal=list(extra), restitution=E)
+        else:
+            b = b.collider(type="sphere", name=f"c{k}", center=list(point), radius=extra, restitution=E)
+    return b.build(contacts=contacts, render=False)
+
+
+def scene_error(scene: str, drag: bool, solver: dict, t_end: float = T_END, fps: int = 60):
+    """(position error at t_end in m, steps taken) of :func:`particle_scene` stepped frame by
+    frame."""
+    s = particle_scene(scene, drag, solver, fps=fps)
+    for _ in range(round(t_end * fps)):
+        s.step(1.0 / fps)
+    steps = s.scene.stats.steps
+    err = float(np.abs(s.particles()["position"][0].astype(np.float64) - reference(scene, drag, t_end)[:3]).max())
+    s.close()
+    return err, steps
