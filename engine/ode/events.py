@@ -60,7 +60,7 @@ def contact_band(dtype):
 
     @ti.func
     def band(x):
-        return EPS_BAND * eps * (1.0 + x.norm())
+        return EPS_BAND * eps * (1.0 + ti.max(ti.abs(x[0]), ti.abs(x[1]), ti.abs(x[2])))
 
     return band
 
@@ -111,7 +111,9 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
     contact's root is the closed form. Returns the state at t + h, the largest scaled error, how
     many events were located, and the fastest impact of the step: event function ``k`` (−1: none), ``lag`` (s before the step's
     end), the point ``x`` on the surface, the normal ``N``, the impact speed and the velocity change
-    |Δv|; ``stopped`` (1: an event function that ``stops`` was hit: y_end is the state at it)."""
+    |Δv| (without a located impact, a contact held at the step's end by the event set's
+    projection, with lag 0);
+    ``stopped`` (1: an event function that ``stops`` was hit: y_end is the state at it)."""
     point, velocity, placed = point_velocity(n)
     eps = _eps(dtype)
     band = contact_band(dtype)
@@ -167,85 +169,98 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
         tau = ti.cast(-1.0, dtype)
         ga, gda, N = events.contact(k, xa, va, span)
         gb, gdb, _Nb = events.contact(k, xb, vb, 0.0)
+        # the bracket [lo, hi] with g(lo) > 0 > g(hi) (one root() call site: it is inlined)
+        lo, glo, gdlo, hi, ghi = ti.cast(0.0, dtype), ga, gda, span, gb
+        found = 0
         if gb < 0.0:
             if ga > band(xa):
-                tau = root(k, xa, va, xb, vb, span, 0.0, ga, gda, span, gb, N, tol_g)
+                found = 1
             elif gda > 0.0 and gdb < 0.0:
                 top = span * gda / (gda - gdb)
                 x, xd = hermite(xa, va, xb, vb, span, top)
                 gt, gdt, _Nt = events.contact(k, x, xd, span - top)
                 if gt > band(x):
-                    tau = root(k, xa, va, xb, vb, span, top, gt, gdt, span, gb, N, tol_g)
-        elif ga > band(xa) and span * ti.max(va.norm(), vb.norm()) > ga + gb:
+                    lo, glo, gdlo, found = top, gt, gdt, 1
+        elif ga > band(xa) and span * span * ti.max(va.norm_sqr(), vb.norm_sqr()) > (ga + gb) * (ga + gb):
             # outside at both ends, but the path is long enough to reach the surface (g is
             # 1-Lipschitz in x; |v| is largest at an end of a constant-acceleration step)
-            s0, g0, gd0 = ti.cast(0.0, dtype), ga, gda
             j = 1
             while j < PASS_SAMPLES:
                 sj = span * j / PASS_SAMPLES
                 x, xd = hermite(xa, va, xb, vb, span, sj)
                 gj, gdj, _Nj = events.contact(k, x, xd, span - sj)
                 if gj < 0.0:
-                    tau = root(k, xa, va, xb, vb, span, s0, g0, gd0, sj, gj, N, tol_g)
+                    hi, ghi, found = sj, gj, 1
                     j = PASS_SAMPLES
-                s0, g0, gd0 = sj, gj, gdj
+                else:
+                    lo, glo, gdlo = sj, gj, gdj
                 j += 1
+        if found != 0:
+            tau = root(k, xa, va, xb, vb, span, lo, glo, gdlo, hi, ghi, N, tol_g)
         return tau
 
     @ti.func
     def run(y, t, h, i, atol, rtol, tol_g):
+        # One call site of ``step`` (it is inlined: the forces' code once, not three times): each
+        # pass steps one piece, either to t + h (then looks for a crossing in it) or to the
+        # event found in the previous pass (then responds and goes on with the rest).
         zero = ti.Vector.zero(dtype, 3)
-        s = ti.cast(0.0, dtype)
-        ya = y
-        yb, err = step(ya, t, h, i, atol, rtol)
+        s, length = ti.cast(0.0, dtype), ti.cast(h, dtype)
+        ya, yb, err = y, y, ti.cast(0.0, dtype)
+        first, acc = -1, zero  # the event the piece ends at (−1: it ends at t + h); a over the piece
         rec_k, rec_lag, rec_x, rec_n = -1, ti.cast(0.0, dtype), zero, zero
         rec_speed, rec_dv = ti.cast(-1.0, dtype), ti.cast(0.0, dtype)
-        stopped, count, searching = 0, 0, 1
-        while searching != 0 and count < MAX_EVENTS:
-            xa, va, xb, vb = point(ya), velocity(ya), point(yb), velocity(yb)
-            span = h - s
-            first, best = -1, span
-            if span > 0.0 and is_finite(xb.sum() + vb.sum()):
-                for k in ti.static(range(n_fn)):
-                    tau = crossing(k, xa, va, xb, vb, span, tol_g)
-                    if tau >= 0.0 and (tau < best or first < 0):
-                        first, best = k, tau
-            if first < 0:
-                searching = 0
-            else:
+        stopped, count, going, exhausted = 0, 0, 1, 0
+        while going != 0:
+            yb, e = step(ya, t + s, length, i, atol, rtol)
+            err = ti.max(err, e)
+            if first >= 0:  # advanced to the event: respond, then the rest of the step
                 count += 1
-                ye, err_e = step(ya, t + s, best, i, atol, rtol)  # advance to the event
-                err = ti.max(err, err_e)
-                xe, ve = point(ye), velocity(ye)
+                lag = h - s - length
+                xe, ve = point(yb), velocity(yb)
                 xr, vr = xe, ve
                 for k in ti.static(range(n_fn)):
                     if k == first:
-                        miss, _gd, Ne = events.contact(k, xe, ve, span - best)
+                        miss, _gd, Ne = events.contact(k, xe, ve, lag)
                         off = ti.max(ti.abs(miss) - band(xe), 0.0)
                         err = ti.max(err, off / (atol + rtol * xe.norm()))
                         # rest (the Zeno tail's end): a rebound whose hop would rise less than
                         # tol_g under the piece's mean acceleration a is not bounced: the event
                         # set rests when e|v_n| ≤ −N·dv, with dv = a·t_rest, t_rest = √(2 tol_g/|N·a|)
-                        acc = (vb - va) / span
                         a_n = Ne.dot(acc)
                         dv_rest = zero
                         if a_n < 0.0:
                             dv_rest = acc * ti.sqrt(2.0 * tol_g / -a_n)
-                        xr, vr, speed, N = events.respond(k, xe, ve, span - best, dv_rest)
+                        xr, vr, speed, N = events.respond(k, xe, ve, lag, dv_rest)
                         if speed > rec_speed:
-                            rec_k, rec_lag, rec_x, rec_n = k, span - best, xr, N
+                            rec_k, rec_lag, rec_x, rec_n = k, lag, xr, N
                             rec_speed, rec_dv = speed, (vr - ve).norm()
                         if ti.static(events.stops(k)):
                             stopped = 1
-                ya = placed(ye, xr, vr)
-                s += best
-                if stopped != 0:
+                ya = placed(yb, xr, vr)
+                s += length
+                length = h - s
+                first = -1
+                if stopped != 0 or length <= 0.0:
                     yb = ya
-                    searching = 0
+                    going = 0
+            else:  # the piece ends at t + h: the earliest crossing in it, if any
+                going = 0
+                if count >= MAX_EVENTS:
+                    exhausted = 1
                 else:
-                    yb, err_b = step(ya, t + s, h - s, i, atol, rtol)  # finish the step from there
-                    err = ti.max(err, err_b)
-        if searching != 0:  # MAX_EVENTS located and the rest of the step not looked at:
+                    xa, va, xb, vb = point(ya), velocity(ya), point(yb), velocity(yb)
+                    best = length
+                    if length > 0.0 and is_finite(xb.sum() + vb.sum()):
+                        for k in ti.static(range(n_fn)):
+                            tau = crossing(k, xa, va, xb, vb, length, tol_g)
+                            if tau >= 0.0 and (tau < best or first < 0):
+                                first, best = k, tau
+                    if first >= 0:
+                        acc = (vb - va) / length
+                        length = best
+                        going = 1
+        if exhausted != 0:  # MAX_EVENTS located and the rest of the step not looked at:
             xb = point(yb)  # ending inside a surface, it is retried shorter (adaptive steps)
             for k in ti.static(range(n_fn)):
                 gb, _gdb, _Nb = events.contact(k, xb, velocity(yb), 0.0)
@@ -254,9 +269,13 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
         if stopped == 0:  # contact held: the event set's projection from the last piece's start
             # (a point that rested at its last event and sank back in under gravity is held
             # there, not bounced with the speed it gained inside)
-            xp, vp, hits, _kill, _w, _np, _sp = events.project(point(yb), velocity(yb), point(ya), velocity(ya), h - s)
+            xp, vp, hits, kill, which, nrm, spd = events.project(point(yb), velocity(yb), point(ya), velocity(ya), h - s)
             if hits > 0:
+                if rec_k < 0:  # a held contact is reported (at the step's end) when none was located
+                    rec_k, rec_lag, rec_x, rec_n = which, ti.cast(0.0, dtype), xp, nrm
+                    rec_speed, rec_dv = spd, (vp - velocity(yb)).norm()
                 yb = placed(yb, xp, vp)
+                stopped = kill
         return yb, err, count, rec_k, rec_lag, rec_x, rec_n, ti.max(rec_speed, 0.0), rec_dv, stopped
 
     return run

@@ -84,7 +84,7 @@ class _Kernels:
             count = 0
             if ti.static(located):
                 yn, err, count, which, lag, _x, _n, _s, _dv, _stop = stepper(y0, t, h, 0, atol, rtol, tol_g)
-                if which >= 0:
+                if count > 0:  # (not a contact held at the step's end)
                     t_ev = t + h - lag
             else:
                 yn, err = stepper(y0, t, h, 0, atol, rtol)

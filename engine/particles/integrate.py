@@ -137,7 +137,7 @@ class ParticleIntegrator:
         if is_finite(x.sum() + v.sum()):
             killed = stopped
             if ti.static(self.has_colliders):
-                if stopped == 0:
+                if ti.static(not self.located):  # (located_step holds contacts itself)
                     nx, nv, n_in, kill_in, which, nrm, spd = self.colliders.project(x, v, x0, v0, h)
                     if n_in > 0:
                         if k < 0 or spd > speed:

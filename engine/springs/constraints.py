@@ -87,14 +87,14 @@ def finalize(model: ti.template(), state: ti.template(), contacts: ti.template()
                 y0 = ti.Vector([xa[0], xa[1], xa[2], acc[0], acc[1], acc[2], va[0], va[1], va[2], 0.0, 0.0, 0.0], dt=dt)
                 y, _err, count, which, lag, xh, nh, speed, _dv, _stop = contacts.locate(
                     y0, ti.cast(t_end - h, dt), hh, i, 1.0, 1.0, 0.0)
-                if count > 0:
+                if count > 0:  # an impact located on the path: the node as the events left it
                     xs, vs = ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[6], y[7], y[8]])
-                xc, vc, hits, _killed, which_p, n_p, speed_p = contacts.colliders.project(xs, vs, xa, va, hh)
-                if hits > 0 and (count == 0 or speed_p > speed):
-                    which, lag, xh, nh, speed = which_p, 0.0, xc, n_p, speed_p
-                if count > 0 or hits > 0:
-                    x = ti.cast(xc, model.dtype)
-                    v = ti.cast(vc, model.dtype)
+                else:  # none: contacts held on the node's own end state (not the path's velocity)
+                    xs, vs, hits, _killed, which, nh, speed = contacts.colliders.project(xs, vs, xa, va, hh)
+                    xh, lag = xs, 0.0
+                if which >= 0:
+                    x = ti.cast(xs, model.dtype)
+                    v = ti.cast(vs, model.dtype)
                     if ti.static(log.enabled):
                         log.record(i, which, xh, ti.cast(nh, ti.f32), ti.cast(speed, ti.f32), t_end - lag)
         if not is_finite(x.sum() + v.sum()):
