@@ -37,10 +37,11 @@ def build_topology(b):
 
 def _thickened(specs, d):
     """The scene's colliders for a body keeping distance d from them: spheres grow by d, planes
-    move by d along their normal (a shift added to the position the control gives)."""
+    move by d along their normal (a shift added to the position the control gives). ``kill`` is
+    for particles: a body's nodes bounce off every collider."""
     out, shift = [], np.zeros((len(specs), 3))
     for k, spec in enumerate(specs):
-        s = dataclasses.replace(spec)
+        s = dataclasses.replace(spec, kill=False)
         if s.kind == "sphere":
             s.radius = spec.radius + d
         else:

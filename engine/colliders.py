@@ -1,23 +1,38 @@
 """Plane and sphere colliders, static or moving, shared by particles and spring nodes.
 
+A collider is an *event set* for the ODE core's event location (:mod:`engine.ode.events`): its
+contact function g is the signed distance from its surface (negative inside), g = (x − p)·N for a
+plane and |x − c| − R for a sphere (NUMERICS.md, "Collisions"), evaluated against where the
+collider is at the same time — a collider moves linearly over a step, from ``collider_point −
+collider_vel·h`` to ``collider_point``, so at ``lag`` seconds before the step's end it is at
+``collider_point − collider_vel·lag``.
+
 Response (Witkin & Baraff, *Particle System Dynamics*; NUMERICS.md), in the collider's frame so a
-moving collider pushes what it hits: with v_r = v − v_c, contact when the point is behind the
-surface and N·v_r < 0; v_n = (N·v_r)N, v_t = v_r − v_n, v_r' = v_t' − e v_n with Coulomb-style
-friction v_t' = max(0, 1 − μ(1 + e)|v_n|/|v_t|) v_t; then the point is projected back onto the
-surface. Energy (in the collider's frame) never grows for e ≤ 1.
+moving collider pushes what it hits: with v_r = v − v_c, v_n = (N·v_r)N, v_t = v_r − v_n,
+v_r' = v_t' − e v_n with Coulomb-style friction v_t' = max(0, 1 − μ(1 + e)|v_n|/|v_t|) v_t; the
+point is put on the surface. Energy (in the collider's frame) never grows for e ≤ 1.
+
+Held (resting) contact: a point that ends a step inside a collider is projected back
+(:meth:`Colliders.project`); if it started the step touching that collider and its rebound e|v_n|
+would be no more than what the step's own acceleration takes out of it (−N·Δv over the step: the
+rebound would land within about two steps) it rests — v_n' = 0, friction with e = 0 — so a
+particle lying on the ground is held there, not bounced and re-detected at every step (the end
+of a bouncing ball's Zeno series).
 
 The set of colliders is fixed when a scene is finalised: their count is a compile-time constant
 and the per-collider loop is unrolled with ``ti.static``, so a scene with no colliders compiles no
-collision code. Their positions live in fields, set from the scene's Control
-(engine.control) before each step: moving one costs no recompilation.
+collision code. Their positions live in fields, set from the scene's Control (engine.control)
+before each step: moving one costs no recompilation.
 """
-from __future__ import annotations
+# (no __future__ annotations: Taichi reads the funcs' ti.template() annotations)
 
 from dataclasses import dataclass, field
 from typing import List, Sequence
 
 import numpy as np
 import taichi as ti
+
+from .ode.events import contact_band
 
 PLANE, SPHERE = 0, 1
 
@@ -44,29 +59,33 @@ class ColliderSpec:
         return sample_path(self.path, t, self.point)
 
 
+@ti.data_oriented
 class Colliders:
-    """Fields for a fixed list of colliders and the ``ti.func`` that resolves contacts.
+    """Fields for a fixed list of colliders and the ``ti.func`` s that find and resolve contacts.
 
-    Fields (shape (count,)): ``collider_point`` (plane point or sphere centre, m),
-    ``collider_normal`` (unit, planes), ``collider_radius`` (m), ``collider_vel`` (m/s, inferred
-    from motion between updates), ``collider_restitution``, ``collider_friction``.
-    ``shift`` (count, 3): an offset added to every position (a soft body keeps its thickness from
-    a plane by a copy of it moved along the normal).
+    Fields (shape (count,), ``dtype``: f32 for scenes, f64 for reference runs): ``collider_point``
+    (plane point or sphere centre at the end of the current step, m), ``collider_normal`` (unit,
+    planes), ``collider_radius`` (m), ``collider_vel`` (m/s over the current step),
+    ``collider_restitution``, ``collider_friction``. ``shift`` (count, 3): an offset added to
+    every position (a soft body keeps its thickness from a plane by a copy of it moved along the
+    normal). ``count``, ``kinds`` and ``kills`` are compile-time constants of the kernels.
     """
 
-    def __init__(self, specs: Sequence[ColliderSpec], shift=None):
+    def __init__(self, specs: Sequence[ColliderSpec], shift=None, dtype=ti.f32):
         self.specs = list(specs)
         self.count = len(self.specs)
+        self.dtype = dtype
         self.kinds = tuple(PLANE if s.kind == "plane" else SPHERE for s in self.specs)
         self.kills = tuple(bool(s.kill) for s in self.specs)
         n = max(1, self.count)
-        self.collider_point = ti.Vector.field(3, ti.f32, shape=n)
-        self.collider_normal = ti.Vector.field(3, ti.f32, shape=n)
-        self.collider_radius = ti.field(ti.f32, shape=n)
-        self.collider_vel = ti.Vector.field(3, ti.f32, shape=n)
-        self.collider_restitution = ti.field(ti.f32, shape=n)
-        self.collider_friction = ti.field(ti.f32, shape=n)
-        self._pos = np.zeros((n, 3), np.float32)
+        self.collider_point = ti.Vector.field(3, dtype, shape=n)
+        self.collider_normal = ti.Vector.field(3, dtype, shape=n)
+        self.collider_radius = ti.field(dtype, shape=n)
+        self.collider_vel = ti.Vector.field(3, dtype, shape=n)
+        self.collider_restitution = ti.field(dtype, shape=n)
+        self.collider_friction = ti.field(dtype, shape=n)
+        self._np = np.float64 if dtype == ti.f64 else np.float32
+        self._pos = np.zeros((n, 3), self._np)
         self.shift = np.zeros((self.count, 3)) if shift is None else np.asarray(shift, np.float64).reshape(-1, 3)
         for k, s in enumerate(self.specs):
             nrm = np.asarray(s.normal, np.float64)
@@ -77,6 +96,7 @@ class Colliders:
             self._pos[k] = s.position_at(0.0) + self.shift[k]
         self.collider_point.from_numpy(self._pos)
         self._t = 0.0
+        self._band = contact_band(dtype)
         self._moved = False
 
     def reset(self) -> None:
@@ -88,16 +108,21 @@ class Colliders:
             self.collider_vel.from_numpy(np.zeros_like(self._pos))
         self._t, self._moved = 0.0, False
 
-    def move_to(self, t: float, positions=None) -> None:
+    def _placed(self, positions) -> np.ndarray:
+        pos = np.asarray(positions, np.float64).reshape(self.count, 3)
+        return (pos + self.shift).astype(self._np) if self.shift.any() else pos.astype(self._np)
+
+    def move_to(self, t: float, positions=None, since=None) -> None:
         """Set the colliders' positions for time t (``positions`` (count, 3), else from their
-        specs' paths) and infer their velocities from the motion since the last call."""
+        specs' paths). Their velocities: over the step ``since = (t0, positions at t0)`` when
+        given (a step's start, so a retried shorter step infers the same motion), else from the
+        motion since the last call."""
         if self.count == 0:
             return
-        pos = np.array([s.position_at(t) for s in self.specs] if positions is None else positions,
-                       np.float64).reshape(self.count, 3)
-        new = (pos + self.shift).astype(np.float32) if self.shift.any() else pos.astype(np.float32)
-        dt = t - self._t
-        vel = (new - self._pos[: self.count]) / dt if dt > 0 else np.zeros_like(new)
+        new = self._placed([s.position_at(t) for s in self.specs] if positions is None else positions)
+        t0, old = (since[0], self._placed(since[1])) if since is not None else (self._t, self._pos[: self.count])
+        dt = t - t0
+        vel = (new - old) / dt if dt > 0 else np.zeros_like(new)
         self._pos[: self.count] = new
         self._t, self._moved = t, True
         self.collider_point.from_numpy(self._pos)
@@ -117,57 +142,78 @@ class Colliders:
         raise KeyError(f"collider: no collider named {name!r} "
                        f"(names: {', '.join(repr(s.name) for s in self.specs if s.name) or 'none'})")
 
-    def make_func(self, report: bool = False):
-        """``collide(x, v) -> (x', v', killed, hits)`` for one point; the per-collider loop is
-        unrolled at compile time. ``hits`` counts contacts resolved; ``killed`` is 1 when a
-        collider with ``kill`` was touched. With ``report`` it also returns the last contact's
-        collider index (−1: none), normal and impact speed −N·v_r (m/s)."""
-        kinds, kills, count = self.kinds, self.kills, self.count
-        cp, cn, cr = self.collider_point, self.collider_normal, self.collider_radius
-        cv, ce, cf = self.collider_vel, self.collider_restitution, self.collider_friction
+    # -- the event set (engine.ode.events) ---------------------------------------------------------
+    def linear(self, k: int) -> bool:
+        """Whether contact k is linear in x (a plane): its root under constant acceleration is
+        a quadratic's (engine.ode.events)."""
+        return self.kinds[k] == PLANE
 
-        @ti.func
-        def collide(x, v):
-            killed = 0
-            hits = 0
-            which = -1
-            n_hit = ti.Vector([0.0, 0.0, 0.0])
-            speed = 0.0
-            for k in ti.static(range(count)):
-                N = ti.Vector([0.0, 1.0, 0.0])
-                depth = 0.0  # signed distance: negative inside
-                if ti.static(kinds[k] == PLANE):
-                    N = cn[k]
-                    depth = (x - cp[k]).dot(N)
-                else:
-                    d = x - cp[k]
-                    dist = d.norm()
-                    N = d / ti.max(dist, 1e-12) if dist > 1e-12 else ti.Vector([0.0, 1.0, 0.0])
-                    depth = dist - cr[k]
-                if depth < 0.0:
-                    hits += 1
-                    if ti.static(kills[k]):
-                        killed = 1
-                    x = x - depth * N  # project back onto the surface
-                    vr = v - cv[k]
-                    vn_s = vr.dot(N)
-                    which = k
-                    n_hit = N
-                    speed = ti.max(0.0, -vn_s)
-                    if vn_s < 0.0:
-                        vn = vn_s * N
-                        vt = vr - vn
-                        e = ce[k]
-                        vt_len = vt.norm()
-                        scale = 0.0
-                        if vt_len > 1e-12:
-                            scale = ti.max(0.0, 1.0 - cf[k] * (1.0 + e) * ti.abs(vn_s) / vt_len)
-                        v = scale * vt - e * vn + cv[k]
-            return x, v, killed, hits, which, n_hit, speed
+    def stops(self, k: int) -> bool:
+        """Whether touching collider k ends the point's motion (``kill``)."""
+        return self.kills[k]
 
-        @ti.func
-        def collide4(x, v):
-            x2, v2, killed, hits, _which, _normal, _speed = collide(x, v)
-            return x2, v2, killed, hits
+    @ti.func
+    def contact(self, k: ti.template(), x, xd, lag):
+        """(g, dg/dt, N) of collider k for a point at x moving at xd, ``lag`` seconds before the
+        step's end: the signed distance from the surface (m, negative inside), its rate (m/s, the
+        collider's own motion included) and the outward unit normal there."""
+        p = self.collider_point[k] - self.collider_vel[k] * lag
+        N = ti.Vector([0.0, 1.0, 0.0], dt=self.dtype)
+        g = ti.cast(0.0, self.dtype)
+        if ti.static(self.kinds[k] == PLANE):
+            N = self.collider_normal[k]
+            g = (x - p).dot(N)
+        else:
+            d = x - p
+            dist = d.norm()
+            if dist > 1e-12:
+                N = d / dist
+            g = dist - self.collider_radius[k]
+        return g, (xd - self.collider_vel[k]).dot(N), N
 
-        return collide if report else collide4
+    @ti.func
+    def respond(self, k: ti.template(), x, v, lag, dv):
+        """Put x on collider k's surface (as placed ``lag`` s before the step's end) and respond:
+        restitution and friction on the velocity relative to the collider, or rest (module
+        docstring) when e·|v_n| ≤ −N·dv (``dv``: the step's velocity change; zero at a located
+        impact, which always bounces). Returns (x', v', impact speed −N·v_r ≥ 0, normal N)."""
+        g, _gd, N = self.contact(k, x, v, lag)
+        x = x - g * N
+        vr = v - self.collider_vel[k]
+        vn_s = vr.dot(N)
+        speed = ti.max(-vn_s, 0.0)
+        if vn_s < 0.0:
+            e = self.collider_restitution[k]
+            if e * speed <= ti.max(-N.dot(dv), 0.0):
+                e = ti.cast(0.0, self.dtype)  # rests: held on the surface
+            vn = vn_s * N
+            vt = vr - vn
+            vt_len = vt.norm()
+            scale = ti.cast(0.0, self.dtype)
+            if vt_len > 1e-12:
+                scale = ti.max(0.0, 1.0 - self.collider_friction[k] * (1.0 + e) * speed / vt_len)
+            v = scale * vt - e * vn + self.collider_vel[k]
+        return x, v, speed, N
+
+    @ti.func
+    def project(self, x, v, x0, v0, h):
+        """Every collider in turn: a point that ended the step of h (from x0, v0) inside is put
+        back on the surface and responds; if it started the step touching that collider (within
+        the rounding band) it may rest (:meth:`respond` with the step's velocity change), so
+        contact at rest is held while a point arriving from outside always bounces. Returns (x',
+        v', hits, killed, last collider touched (−1: none), its normal, the impact speed there)."""
+        killed, hits, which = 0, 0, -1
+        n_hit = ti.Vector([0.0, 1.0, 0.0], dt=self.dtype)
+        speed = ti.cast(0.0, self.dtype)
+        zero = ti.Vector.zero(self.dtype, 3)
+        for k in ti.static(range(self.count)):
+            g, _gd, _N = self.contact(k, x, v, 0.0)
+            if g < 0.0:
+                hits += 1
+                if ti.static(self.kills[k]):
+                    killed = 1
+                g0, _gd0, _N0 = self.contact(k, x0, v0, h)
+                dv = v - v0 if g0 <= self._band(x0) else zero
+                x, v, speed, n_hit = self.respond(k, x, v, 0.0, dv)
+                which = k
+        return x, v, hits, killed, which, n_hit, speed

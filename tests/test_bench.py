@@ -16,7 +16,7 @@ EXPECTED = {
     "effects": ["sparks", "worst effect", "empty scene, render only"],
     "ode": ["engine RK4 step doubling (f32)", "scipy solve_ivp RK45 (f64)"],
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
-    "features": ["all features", "none of them"],
+    "features": ["all features", "none of them", "impacts projected", "impacts located"],
     "output": ["sim + render (no output)", "particles run, 1 encoder"],
     "wedge": ["2 x particles run, one after another", "particles wedge, 2 workers x 1 thread"],
     "api": ["first build of sparks", "level restart", "second copy, prepared", "3 build/discard cycles",

@@ -78,13 +78,13 @@ def test_adaptive_lands_on_target_controls_error_and_resumes_after_clip():
 
 
 def test_after_a_clipped_landing_the_step_the_controller_wanted_resumes():
-    class Steady(Decay):  # err = 0.81: the controller keeps h (0.9 · 0.81^(−1/2) = 1)
-        def attempt(self, t, h):
-            super().attempt(t, h)
-            return 0.81
+    class Keep:  # a controller that accepts every step and keeps its h (the driver's rules alone)
+        def propose(self, h, err):
+            return True, h
 
-    sys = Steady()
+    sys = Decay()
     d = Driver(sys, StepPolicy(h=0.3, adaptive=True))
+    d.controller = Keep()
     d.advance(0.0, 1.0)
     # approaching the target the remainder is split in two equal steps, not a step and a sliver
     assert [round(c[2], 12) for c in steps(sys, "commit")] == [0.3, 0.3, 0.2, 0.2]

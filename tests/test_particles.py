@@ -53,15 +53,15 @@ def test_lifetimes_end_on_time():
 
 
 def _collide_batch(colliders, x0, v0):
-    """Positions and velocities after one pass of the colliders' function over (x0, v0)."""
-    collide = colliders.make_func()
+    """Positions and velocities after one pass of the colliders' projection over (x0, v0) (a
+    step of length 0 that starts where it ends: no resting, every contact responds)."""
     X = ti.Vector.field(3, ti.f32, shape=len(x0))
     V = ti.Vector.field(3, ti.f32, shape=len(x0))
 
     @ti.kernel
     def run():
         for i in X:
-            x, v, _, _ = collide(X[i], V[i])
+            x, v, _hits, _killed, _which, _n, _speed = colliders.project(X[i], V[i], X[i], V[i], 0.0)
             X[i] = x
             V[i] = v
 
@@ -231,12 +231,16 @@ def test_moving_emitter_follows_its_path_and_hands_down_its_velocity():
     np.testing.assert_allclose(p[:, 0], 2.0 * 0.5, atol=1e-3)
 
 
-def test_fixed_steps_fused_into_runs_give_the_same_bytes_as_step_by_step(monkeypatch):
+@pytest.mark.parametrize("impacts", [pytest.param("projected", marks=pytest.mark.slow), "located"])
+def test_fixed_steps_fused_into_runs_give_the_same_bytes_as_step_by_step(monkeypatch, impacts):
     """Where nothing is due between fixed steps (no births, still colliders, no sub-emitters)
-    they run in one launch: the same particles, bit for bit, and fewer launches."""
+    they run in one launch: the same particles, bit for bit, and fewer launches. (With located
+    impacts the run kernel compiles the event code into a loop and LLVM may round a located
+    bounce differently in the last bit: the same to float32 rounding there; either way a
+    config's frames are the same bytes run after run, the runs being decided by the schedule.)"""
     from engine.particles import integrate, system
 
-    d = scene_dict(frames=1, fps=30, seed=2, solver={"integrator": "rk4", "h": 1 / 240},
+    d = scene_dict(frames=1, fps=30, seed=2, solver={"integrator": "rk4", "h": 1 / 240, "impacts": impacts},
                    forces={"gravity": [0.0, -9.81, 0.0], "drag": 0.4},
                    emitters=[{"rate": 20.0, "lifetime": 3.0, "speed": [1.0, 3.0], "spread": 40.0,
                               "buoyancy": 4.0, "bursts": [{"time": 0.0, "count": 500}]}],
@@ -253,5 +257,9 @@ def test_fixed_steps_fused_into_runs_give_the_same_bytes_as_step_by_step(monkeyp
         out[max_run] = (s.positions(), s.velocities(), s.stats.steps)
     assert runs and min(runs) > 1 and sum(runs) > 100  # births every ~12 steps: runs of up to 11
     assert out[1][2] == out[system.MAX_RUN][2] == 160
-    np.testing.assert_array_equal(out[1][0], out[system.MAX_RUN][0])
-    np.testing.assert_array_equal(out[1][1], out[system.MAX_RUN][1])
+    if impacts == "projected":
+        np.testing.assert_array_equal(out[1][0], out[system.MAX_RUN][0])
+        np.testing.assert_array_equal(out[1][1], out[system.MAX_RUN][1])
+    else:
+        np.testing.assert_allclose(out[1][0], out[system.MAX_RUN][0], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(out[1][1], out[system.MAX_RUN][1], rtol=0, atol=1e-5)

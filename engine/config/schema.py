@@ -334,6 +334,8 @@ class Solver(Strict):
     adaptive: bool = False  # step doubling
     tolerance: Annotated[float, Field(gt=0, le=1.0)] = 1e-3  # rtol for step doubling
     atol: Optional[Annotated[float, Field(gt=0, le=1.0)]] = None  # default: tolerance
+    extrapolate: bool = True  # step doubling keeps y2 + Δ/(2^p − 1) (order p + 1; README)
+    impacts: Literal["located", "projected"] = "located"  # collisions found in time, or projected after the step
     max_steps_per_frame: Annotated[int, Field(ge=1, le=100_000)] = 1000
 
 

@@ -17,7 +17,8 @@ and diffrax's ``diffeqsolve`` split the work the same way). The protocol:
 * optional ``first_step(t, t_end) -> h``: a first trial step when the policy gives none;
 * optional ``locate(t, h) -> tau or None``: an event inside an accepted trial step (a collision);
   the driver then cuts the step to end at t + tau, so a system can resolve the event at its time
-  from the step's dense output before going on (the hook issue 14's event location plugs into).
+  before going on. The built-in systems do not use it: their impacts are located per element
+  inside the step (:mod:`engine.ode.events`), so a pool's step is not cut once per contact.
 
 Policy, one for all systems (:class:`StepPolicy`): fixed steps are ceil(span/h) equal substeps
 landing exactly on the target; adaptive steps start from the policy's h (or the system's

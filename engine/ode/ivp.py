@@ -18,7 +18,11 @@ import taichi as ti
 from ..runtime import ensure_init, on_reset
 from .driver import NONFINITE, STEP_TOO_SMALL as _TOO_SMALL, Driver, SimulationDiverged, StepPolicy
 from .methods import method as _method
-from .steppers import doubling_step, is_finite, make_step, scaled_error
+from .events import doubling_error, fixed_error, located_step
+from .steppers import doubling_step, is_finite, make_step
+
+MAX_EVENT_RECORDS = 10_000  # event times kept per solve (OdeResult.t_events)
+EVENT_TOL = 0.01  # adaptive runs locate an event to 1% of atol (fixed steps: to rounding)
 
 SUCCESS, DIVERGED, STEP_TOO_SMALL, TOO_MANY_STEPS = 0, -1, -2, -3
 
@@ -26,7 +30,8 @@ SUCCESS, DIVERGED, STEP_TOO_SMALL, TOO_MANY_STEPS = 0, -1, -2, -3
 @dataclass
 class OdeResult:
     """Outcome of :func:`solve`. ``y`` has shape (n, len(t)) as in scipy; ``status`` is 0 on
-    success and negative on failure, with ``message`` saying why (method, h and t)."""
+    success and negative on failure, with ``message`` saying why (method, h and t);
+    ``t_events``: when events were located (solve's ``events``)."""
 
     t: np.ndarray
     y: np.ndarray
@@ -37,6 +42,7 @@ class OdeResult:
     message: str = "ok"
     h_last: float = math.nan
     h_history: list = field(default_factory=list, repr=False)
+    t_events: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
     def success(self) -> bool:
@@ -44,9 +50,9 @@ class OdeResult:
 
 
 class _Kernels:
-    """Fields and kernels for one (f, method, n, dtype, extrapolate): built once, reused."""
+    """Fields and kernels for one (f, method, n, dtype, extrapolate, events): built once, reused."""
 
-    def __init__(self, f, method, n, dtype, extrapolate):
+    def __init__(self, f, method, n, dtype, extrapolate, events):
         @ti.func
         def g(y, t, i):
             return f(y, t)
@@ -59,8 +65,38 @@ class _Kernels:
                 return y2
         else:
             step = make_step(method, g, n, dtype)
+        fixed, doubled = fixed_error(step, dtype), doubling_error(dstep)
+        located = events is not None
+        if located:  # the same event location as the particles' (engine.ode.events)
+            fixed = located_step(fixed, events, n, dtype)
+            doubled = located_step(doubled, events, n, dtype)
         self.y = y = ti.Vector.field(n, dtype, shape=())
         self.cand = cand = ti.Vector.field(n, dtype, shape=())
+        self.t_events = t_events = ti.field(dtype, shape=MAX_EVENT_RECORDS if located else 1)
+        self.n_events = n_events = ti.field(ti.i32, shape=())  # accepted steps with an event
+        self.located = located_count = ti.field(ti.i32, shape=())  # events located in every attempt
+        cand_event = ti.field(dtype, shape=())
+
+        @ti.func
+        def advance(stepper: ti.template(), y0, t, h, atol, rtol, tol_g):
+            """(y, err, events located, time of the step's fastest event or −1) for one step."""
+            t_ev, yn, err = ti.cast(-1.0, dtype), y0, ti.cast(0.0, dtype)
+            count = 0
+            if ti.static(located):
+                yn, err, count, which, lag, _x, _n, _s, _dv, _stop = stepper(y0, t, h, 0, atol, rtol, tol_g)
+                if count > 0:  # (not a contact held at the step's end)
+                    t_ev = t + h - lag
+            else:
+                yn, err = stepper(y0, t, h, 0, atol, rtol)
+            return yn, err, count, t_ev
+
+        @ti.func
+        def record(t_ev):
+            if t_ev >= 0.0:
+                c = n_events[None]
+                if c < MAX_EVENT_RECORDS:
+                    t_events[c] = t_ev
+                n_events[None] = c + 1
 
         @ti.kernel
         def run_fixed(t0: dtype, h: dtype, nsteps: ti.i32) -> ti.i32:
@@ -69,28 +105,36 @@ class _Kernels:
             ti.loop_config(serialize=True)  # one small state, step after step (not a per-frame kernel)
             for k in range(nsteps):
                 if done == k:
-                    yn = step(y[None], t0 + k * h, h, 0)
+                    yn, _err, count, t_ev = advance(fixed, y[None], t0 + k * h, h, 1.0, 1.0, 0.0)
+                    located_count[None] += count
                     if is_finite(yn.sum()):
                         y[None] = yn
+                        record(t_ev)
                         done += 1
             return done
 
         @ti.kernel
         def attempt(t: dtype, h: dtype, atol: dtype, rtol: dtype) -> dtype:
-            y0 = y[None]
-            y2, est = dstep(y0, t, h, 0)
-            cand[None] = y2
-            return scaled_error(y0, y2, est, atol, rtol)
+            yn, err, count, t_ev = advance(doubled, y[None], t, h, atol, rtol, EVENT_TOL * atol)
+            cand[None] = yn
+            cand_event[None] = t_ev
+            located_count[None] += count
+            return err
 
         @ti.kernel
         def accept():
             y[None] = cand[None]
+            record(cand_event[None])
 
         @ti.kernel
         def deriv(t: dtype):
             cand[None] = g(y[None], t, 0)
 
         self.run_fixed, self.attempt, self.accept, self.deriv = run_fixed, attempt, accept, deriv
+
+    def events(self) -> np.ndarray:
+        n = min(int(self.n_events[None]), MAX_EVENT_RECORDS)
+        return self.t_events.to_numpy()[:n].astype(np.float64)
 
 
 _cache: dict = {}
@@ -103,10 +147,10 @@ def _drop_cache():
 on_reset(_drop_cache)
 
 
-def _kernels(f, method, n, dtype, extrapolate) -> _Kernels:
-    key = (f, method, n, dtype, extrapolate)
+def _kernels(f, method, n, dtype, extrapolate, events) -> _Kernels:
+    key = (f, method, n, dtype, extrapolate, id(events))
     if key not in _cache:
-        _cache[key] = _Kernels(f, method, n, dtype, extrapolate)
+        _cache[key] = _Kernels(f, method, n, dtype, extrapolate, events)
     return _cache[key]
 
 
@@ -168,8 +212,9 @@ class _SmallSystem:
 
 def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
           h: Optional[float] = None, tol: Optional[float] = None, t_eval=None, dtype=ti.f64,
-          rtol: Optional[float] = None, atol: Optional[float] = None, extrapolate: bool = False,
-          h_min: float = 1e-12, max_steps: int = 1_000_000) -> OdeResult:
+          rtol: Optional[float] = None, atol: Optional[float] = None,
+          extrapolate: Optional[bool] = None, h_min: float = 1e-12, max_steps: int = 1_000_000,
+          events=None) -> OdeResult:
     """Integrate y' = f(y, t) from ``t_span[0]`` to ``t_span[1]``.
 
     f: a ``@ti.func`` taking a ``ti.Vector`` of length n = len(y0) and a scalar t, returning dy/dt.
@@ -179,8 +224,16 @@ def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
        y = (q, p) of even length).
     h: the fixed step (without ``tol``), or the first trial step (with it).
     extrapolate: use the step-doubling result y2 + Δ/(2^p − 1) (order p + 1), with fixed or
-       adaptive steps.
-    tol: turns on step doubling with rtol = atol = tol unless given separately.
+       adaptive steps. Default: with adaptive steps (measured: at equal error it needs fewer
+       evaluations on every reference problem — README, "What the tolerance bounds"), not with
+       fixed ones.
+    tol: turns on step doubling with rtol = atol = tol unless given separately; what it bounds:
+       every accepted step's estimated local error, max over components of
+       |est_i| / (atol + rtol·max(|y_i|, |y_new_i|)) ≤ 1.
+    events: an event set located inside every step (:mod:`engine.ode.events`; e.g. an
+       :class:`engine.colliders.Colliders` of dtype ``dtype``) for a second-order state
+       y = (q, p), q' = p, whose first three components of q are a point: the point bounces.
+       ``OdeResult.t_events`` holds the time of each step's fastest event.
     t_eval: output times (sorted, inside t_span). Steps land exactly on them. Default: the end
        points for fixed steps, every accepted step for adaptive runs.
     h_min, max_steps: the driver gives up when a rejection would take h below h_min, or after
@@ -201,7 +254,16 @@ def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
     targets = [t1] if t_eval is None else [float(v) for v in t_eval]
     if any(b <= a for a, b in zip(targets, targets[1:])) or targets[0] < t0 or targets[-1] > t1:
         raise ValueError("t_eval: must be increasing and inside t_span")
-    K = _kernels(f, method, n, dtype, bool(extrapolate))
+    if extrapolate is None:
+        extrapolate = adaptive
+    if events is not None:
+        if n % 2 or n < 6:
+            raise ValueError(f"events: need a second-order state (q, p) with a 3-D point, got {n} components")
+        if any(events.stops(k) for k in range(events.count)):
+            raise ValueError("events: an event that stops the motion (a kill collider) is not supported here")
+    K = _kernels(f, method, n, dtype, bool(extrapolate), events)
+    K.n_events[None] = 0
+    K.located[None] = 0
     K.y[None] = y0.tolist()
     ts, ys = ([t0], [y0.copy()]) if (t_eval is None or targets[0] == t0) else ([], [])
     rt = tol if rtol is None else rtol
@@ -238,7 +300,8 @@ def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
         res.message = str(e)
     st = driver.stats
     res.n_accepted, res.n_rejected = st.steps, st.rejected
-    res.nfev += per_step * (st.steps + st.rejected)
+    res.nfev += per_step * (st.steps + st.rejected + 2 * int(K.located[None]))  # an event: two more steps
+    res.t_events = K.events() if events is not None else np.empty(0)
     res.h_history = h_seen if adaptive else []
     res.h_last = h_seen[-1] if h_seen else math.nan
     res.t = np.asarray(ts)

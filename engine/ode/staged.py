@@ -109,7 +109,8 @@ class FieldStepper:
 
 
 @ti.kernel
-def _copy(xs: ti.template(), vs: ti.template(), xd: ti.template(), vd: ti.template(), n: ti.i32):
+def copy_nodes(xs: ti.template(), vs: ti.template(), xd: ti.template(), vd: ti.template(), n: ti.i32):
+    """(xd, vd)[:n] = (xs, vs)[:n]."""
     for i in range(n):
         xd[i] = xs[i]
         vd[i] = vs[i]
@@ -156,12 +157,12 @@ class StagedDoubling:
             return 0.0
         before = before or (lambda h_, end: None)
         x, v, n = st.x, st.v, st.n
-        _copy(x, v, self.x0, self.v0, n)
+        copy_nodes(x, v, self.x0, self.v0, n)
         before(h, 1.0)
         st.accel(x, v, st.a, 0)  # a(y0), shared by the full step and the first half step
         st.step(h, first_eval_done=True)
-        _copy(x, v, self.x1, self.v1, n)
-        _copy(self.x0, self.v0, x, v, n)
+        copy_nodes(x, v, self.x1, self.v1, n)
+        copy_nodes(self.x0, self.v0, x, v, n)
         before(h / 2, 0.5)
         st.step(h / 2, first_eval_done=True)
         before(h / 2, 1.0)
@@ -172,4 +173,4 @@ class StagedDoubling:
     def rollback(self) -> None:
         st = self.stepper
         if st.n:
-            _copy(self.x0, self.v0, st.x, st.v, st.n)
+            copy_nodes(self.x0, self.v0, st.x, st.v, st.n)

@@ -2,8 +2,10 @@
 
 Each particle's state is y = (x, age, v, 0) ∈ R⁸ with y' = (v, 1, a(x, v, age, t), 0); the
 particles do not interact, so all stages of a method run in registers inside one parallel loop
-(PERF-NOTES: one fused RK4 kernel is ~3× faster than stage kernels). Colliders and ageing run in
-the same kernel after the step (:meth:`ParticleIntegrator.finish`). With step doubling,
+(PERF-NOTES: one fused RK4 kernel is ~3× faster than stage kernels). Impacts are located inside
+the step in the same kernel (the ODE core's :func:`~engine.ode.events.located_step`: each
+particle advanced to its impact time, reflected, finished), then contacts are held and the
+particle aged (:meth:`ParticleIntegrator.finish`). With step doubling,
 ``attempt`` writes a candidate and returns the max-norm error over live particles (a max is
 order-independent, so the result does not depend on threads); ``commit`` accepts it.
 
@@ -13,6 +15,7 @@ stepper, forces and colliders are compile-time parts of it), warp.sim style; the
 """
 import taichi as ti
 
+from ..ode.events import doubling_error, fixed_error, located_step
 from ..ode.steppers import doubling_step, is_finite, make_step, scaled_error
 
 NO_FAILURE = 1e30  # sentinel in nonfinite_t: no particle went non-finite (f32 inf does not survive a field write)
@@ -35,12 +38,6 @@ def _v(y):
     return ti.Vector([y[4], y[5], y[6]])
 
 
-@ti.func
-def no_collision(x, v):
-    """``collide`` of a scene without colliders: nothing hit (the compiler drops the branches)."""
-    return x, v, 0, 0, -1, ti.Vector([0.0, 0.0, 0.0]), 0.0
-
-
 def particle_derivative(accel):
     """(f, f_q) for the ODE core's steppers: f(y, t, i) = (v, 1, a(x, v, age, t), 0) with the
     scene's acceleration ``accel(x, v, age, t, i)``; f_q(y, t, i) = (v, 1, 0, 0), all the drift of a
@@ -58,26 +55,37 @@ def particle_derivative(accel):
     return deriv, deriv_q
 
 
+
 @ti.data_oriented
 class ParticleIntegrator:
     """The compiled parts of a scene's particle step and what the step reports.
 
-    ``collide``: the colliders' reporting function (``make_func(report=True)``; None: no
-    colliders). With ``contacts`` > 0 up to that many contacts between drains are recorded in
-    ``contact_*`` fields (slot, collider, position, normal, impact speed, time); without, the
-    unused report outputs are dead code the compiler drops. With ``events`` each step records in
-    ``particle_event`` who died (bit 1) or hit a collider (bit 2, |Δv| in ``particle_impact``)
-    for the sub-emitters, after clearing the previous step's."""
+    ``colliders``: the scene's :class:`~engine.colliders.Colliders` (None: none). ``impacts``:
+    "located" (each particle's impacts found in time inside the step by the ODE core's
+    :func:`~engine.ode.events.located_step`, then the step is finished from there) or "projected"
+    (a point that ends a step inside a collider is put back on the surface and reflected: first
+    order in h, the cheapest). Both hold contact at rest with the colliders' projection.
+    ``quadratic``: the acceleration is constant over a step (gravity only): a plane's impact time
+    is a closed form. With ``contacts`` > 0 up to that many contacts between drains are recorded in
+    ``contact_*`` fields (slot, collider, position, normal, impact speed, time: the located time
+    and position of the step's fastest impact); without, the unused outputs are dead code. With
+    ``events`` each step records in ``particle_event`` who died (bit 1) or hit a collider (bit 2,
+    |Δv| in ``particle_impact``, where and how long before the step's end in
+    ``particle_impact_pos``/``particle_impact_lag``) for the sub-emitters, after clearing the
+    previous step's. With step doubling the step's fastest impact waits in ``cand_hit*`` fields
+    until the step is committed."""
 
-    def __init__(self, state, accel, collide, method: str, adaptive: bool, extrapolate=False,
-                 events: bool = False, contacts: int = 0):
+    def __init__(self, state, accel, colliders, method: str, adaptive: bool, extrapolate=False,
+                 events: bool = False, contacts: int = 0, impacts: str = "located", quadratic: bool = False):
         self.state, self.cap = state, state.capacity
         self.nonfinite_t = ti.field(ti.f32, shape=())
         self.err = ti.field(ti.f32, shape=())
-        self.hits = ti.field(ti.i32, shape=())
+        self.hits = ti.field(ti.i32, shape=())  # particle-steps with a contact (one record each)
         self.nonfinite_t[None] = NO_FAILURE
-        self.has_colliders = collide is not None
-        self.collide = collide if collide is not None else no_collision
+        self.has_colliders = colliders is not None and colliders.count > 0
+        self.adaptive = bool(adaptive)
+        self.colliders = colliders
+        self.located = self.has_colliders and impacts == "located"
         self.events = bool(events)
         self.record = bool(contacts) and self.has_colliders
         self.max_contacts = int(contacts)
@@ -92,28 +100,62 @@ class ParticleIntegrator:
         deriv, deriv_q = particle_derivative(accel)
         self.step = make_step(method, deriv, 8, ti.f32, fq=deriv_q)
         self.dstep = doubling_step(method, deriv, 8, ti.f32, extrapolate, fq=deriv_q) if adaptive else None
+        if self.located:
+            stepper = doubling_error(self.dstep) if adaptive else fixed_error(self.step, ti.f32)
+            self.locate = located_step(stepper, colliders, 8, ti.f32, quadratic)
+        if adaptive and self.located:
+            n = max(1, self.cap)
+            self.cand_hit = ti.field(ti.i32, shape=n)  # collider + 1 (0: none), negative: it stopped the particle
+            if self.record or self.events:
+                self.cand_hit_lag, self.cand_hit_speed = ti.field(ti.f32, shape=n), ti.field(ti.f32, shape=n)
+                self.cand_hit_dv = ti.field(ti.f32, shape=n)
+                self.cand_hit_pos = ti.Vector.field(3, ti.f32, shape=n)
+                self.cand_hit_n = ti.Vector.field(3, ti.f32, shape=n)
 
     @ti.func
-    def finish(self, i, x, v, t_end, h):
-        """Collide, age and retire particle i after an accepted step ending at t_end."""
+    def advance(self, y0, t, h, i, atol: ti.f32, rtol: ti.f32, tol_g: ti.f32):
+        """One step of y0 from t by h (fixed or step doubling): (y, err, impact...) as
+        :func:`~engine.ode.events.located_step` returns them; without located impacts, none."""
+        zero = ti.Vector([0.0, 0.0, 0.0])
+        y, err = y0, 0.0
+        k, lag, xh, nh, speed, dv, stopped = -1, 0.0, zero, zero, 0.0, 0.0, 0
+        if ti.static(self.located):
+            y, err, _count, k, lag, xh, nh, speed, dv, stopped = self.locate(y0, t, h, i, atol, rtol, tol_g)
+        elif ti.static(self.adaptive):
+            y2, est = self.dstep(y0, t, h, i)
+            y, err = y2, scaled_error(y0, y2, est, atol, rtol)
+        else:
+            y = self.step(y0, t, h, i)
+        return y, err, k, lag, xh, nh, speed, dv, stopped
+
+    @ti.func
+    def finish(self, i, x0, v0, x_end, v_end, t_end, h, k_hit, lag_hit, x_hit, n_hit, s_hit, dv_hit, stopped):
+        """Accept particle i's step ending at t_end: hold contacts (the colliders' projection),
+        record the step's fastest impact (the located one, or a projection's), age and retire."""
         S = self.state
+        x, v, k, lag, xh, nh, speed, dv = x_end, v_end, k_hit, lag_hit, x_hit, n_hit, s_hit, dv_hit
         if is_finite(x.sum() + v.sum()):
-            killed = 0
+            killed = stopped
             if ti.static(self.has_colliders):
-                nx, nv, k, nh, which, nrm, spd = self.collide(x, v)
-                if ti.static(self.record):
-                    if nh > 0:
+                if ti.static(not self.located):  # (located_step holds contacts itself)
+                    nx, nv, n_in, kill_in, which, nrm, spd = self.colliders.project(x, v, x0, v0, h)
+                    if n_in > 0:
+                        if k < 0 or spd > speed:
+                            k, lag, xh, nh, speed, dv = which, 0.0, nx, nrm, spd, (nv - v).norm()
+                    x, v, killed = nx, nv, kill_in
+                if k >= 0:  # one contact per particle and step: its fastest (records = hits)
+                    ti.atomic_add(self.hits[None], 1)
+                    if ti.static(self.record):
                         c = ti.atomic_add(self.contact_count[None], 1)  # order fixed later by (time, slot)
                         if c < self.max_contacts:
-                            self.contact_slot[c], self.contact_collider[c], self.contact_pos[c] = i, which, nx
-                            self.contact_normal[c], self.contact_speed[c], self.contact_time[c] = nrm, spd, t_end
-                if ti.static(self.events):
-                    if nh > 0:
+                            self.contact_slot[c], self.contact_collider[c], self.contact_pos[c] = i, k, xh
+                            self.contact_normal[c], self.contact_speed[c] = nh, speed
+                            self.contact_time[c] = t_end - lag
+                    if ti.static(self.events):
                         S.particle_event[i] |= 2
-                        S.particle_impact[i] = (nv - v).norm()
-                x, v, killed = nx, nv, k
-                if nh > 0:
-                    ti.atomic_add(self.hits[None], nh)
+                        S.particle_impact[i] = dv
+                        S.particle_impact_pos[i] = xh
+                        S.particle_impact_lag[i] = lag
             S.particle_pos[i] = x
             S.particle_vel[i] = v
             a = S.particle_age[i] + h
@@ -142,9 +184,10 @@ def _step_one(I: ti.template(), i, t: ti.template(), h: ti.template()):
     if S.particle_alive[i] != 0:
         a0 = ti.min(S.particle_age[i], 0.0)  # < 0: born a0 seconds into this step
         if -a0 < h:
-            y = I.step(_pack(S.particle_pos[i], ti.max(S.particle_age[i], 0.0), S.particle_vel[i]),
-                       t - a0, h + a0, i)
-            I.finish(i, _x(y), _v(y), t + h, h)
+            x0, v0 = S.particle_pos[i], S.particle_vel[i]
+            y0 = _pack(x0, ti.max(S.particle_age[i], 0.0), v0)
+            y, _err, k, lag, xh, nh, speed, dv, stopped = I.advance(y0, t - a0, h + a0, i, 1.0, 1.0, 0.0)
+            I.finish(i, x0, v0, _x(y), _v(y), t + h, h, k, lag, xh, nh, speed, dv, stopped)
         else:
             S.particle_age[i] += h  # not born yet
 
@@ -168,8 +211,9 @@ def step_fixed_run(I: ti.template(), t0: ti.f64, h: ti.f64, j: ti.i32, k: ti.i32
 
 
 @ti.kernel
-def attempt(I: ti.template(), t: ti.f32, h: ti.f32, atol: ti.f32, rtol: ti.f32) -> ti.f32:
-    """Step doubling from t by h into ``cand_pos``/``cand_vel``; returns the scaled max-norm error."""
+def attempt(I: ti.template(), t: ti.f32, h: ti.f32, atol: ti.f32, rtol: ti.f32, tol_g: ti.f32) -> ti.f32:
+    """Step doubling from t by h into ``cand_pos``/``cand_vel`` (and the step's fastest impact into
+    ``cand_hit*``); returns the scaled max-norm error."""
     S = I.state
     I.err[None] = 0.0
     for i in range(I.cap):
@@ -177,25 +221,41 @@ def attempt(I: ti.template(), t: ti.f32, h: ti.f32, atol: ti.f32, rtol: ti.f32) 
             a0 = ti.min(S.particle_age[i], 0.0)
             if -a0 < h:
                 y0 = _pack(S.particle_pos[i], ti.max(S.particle_age[i], 0.0), S.particle_vel[i])
-                y2, est = I.dstep(y0, t - a0, h + a0, i)
-                S.cand_pos[i] = _x(y2)
-                S.cand_vel[i] = _v(y2)
-                ti.atomic_max(I.err[None], scaled_error(y0, y2, est, atol, rtol))
+                y, err, k, lag, xh, nh, speed, dv, stopped = I.advance(y0, t - a0, h + a0, i, atol, rtol, tol_g)
+                S.cand_pos[i] = _x(y)
+                S.cand_vel[i] = _v(y)
+                if ti.static(I.located):
+                    I.cand_hit[i] = (k + 1) * (1 - 2 * stopped)
+                    if ti.static(I.record or I.events):
+                        I.cand_hit_lag[i], I.cand_hit_pos[i], I.cand_hit_n[i] = lag, xh, nh
+                        I.cand_hit_speed[i], I.cand_hit_dv[i] = speed, dv
+                ti.atomic_max(I.err[None], err)
             else:
                 S.cand_pos[i] = S.particle_pos[i]
                 S.cand_vel[i] = S.particle_vel[i]
+                if ti.static(I.located):
+                    I.cand_hit[i] = 0
     return I.err[None]
 
 
 @ti.kernel
 def commit(I: ti.template(), t: ti.f32, h: ti.f32):
-    """Accept the attempted step: collide, age, retire."""
+    """Accept the attempted step: hold contacts, record impacts, age, retire."""
     S = I.state
+    zero = ti.Vector([0.0, 0.0, 0.0])
     for i in range(I.cap):
         I.clear_event(i)
         if S.particle_alive[i] != 0:
             if S.particle_age[i] + h > 0:
-                I.finish(i, S.cand_pos[i], S.cand_vel[i], t + h, h)
+                k, lag, xh, nh, speed, dv, stopped = -1, 0.0, zero, zero, 0.0, 0.0, 0
+                if ti.static(I.located):
+                    c = I.cand_hit[i]
+                    k, stopped = ti.abs(c) - 1, ti.cast(c < 0, ti.i32)
+                    if ti.static(I.record or I.events):
+                        lag, xh, nh = I.cand_hit_lag[i], I.cand_hit_pos[i], I.cand_hit_n[i]
+                        speed, dv = I.cand_hit_speed[i], I.cand_hit_dv[i]
+                I.finish(i, S.particle_pos[i], S.particle_vel[i], S.cand_pos[i], S.cand_vel[i], t + h, h, k, lag, xh, nh,
+                         speed, dv, stopped)
             else:
                 S.particle_age[i] += h  # not born yet
 

@@ -70,10 +70,11 @@ class ParticleState:
     ``particle_life`` (f32, s), ``particle_alive`` (i32 0/1), ``particle_emitter`` (i32),
     ``particle_rand`` (f32 in [0, 1): per-particle variation for size and colour).
     With adaptive stepping, ``cand_pos``/``cand_vel`` hold the attempted step; with sub-emitters,
-    ``particle_event`` and ``particle_impact`` record deaths and collisions; with ``interpolate``,
-    ``particle_prev_pos`` (vec3 f32, m) holds where each particle was before the last game step
-    (NaN for a slot that was not alive then), what ``render(alpha=)`` draws from (each allocated
-    only then).
+    ``particle_event``, ``particle_impact``, ``particle_impact_pos`` and ``particle_impact_lag``
+    record deaths and collisions (the last two: where and how long before the step's end it hit);
+    with ``interpolate``, ``particle_prev_pos`` (vec3 f32, m) holds where each particle was before
+    the last game step (NaN for a slot that was not alive then), what ``render(alpha=)`` draws from
+    (each allocated only then).
     """
 
     def __init__(self, capacity: int, adaptive: bool, events: bool = False, interpolate: bool = False):
@@ -88,6 +89,8 @@ class ParticleState:
         if events:  # sub-emitters: what happened to each particle during the last step
             self.particle_event = scalar(ti.i32)  # bit 1 died, bit 2 hit a collider
             self.particle_impact = scalar(ti.f32)  # |Δv| of its last collision, m/s
+            self.particle_impact_pos = vec3()  # where it hit (the located point on the surface), m
+            self.particle_impact_lag = scalar(ti.f32)  # how long before the step's end it hit, s
         if adaptive:
             self.cand_pos, self.cand_vel = vec3(), vec3()
         self.interpolate = bool(interpolate)

@@ -142,7 +142,9 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), p_
                    c_start: ti.i32, c_size: ti.i32, count: ti.i32):
     """Pass 2: each slice adds up the counts before it (its parents' first rank) and walks its
     parents in slot order; the n-th child of the pass takes ring slot head + n and serial
-    serial + n. A child that finds its slot alive, or that would wrap onto a slot this pass already
+    serial + n. A collision's children are born where and when the impact was located: at the
+    point on the surface, then moved along their velocity for the time left in the step (the
+    age they start with). A child that finds its slot alive, or that would wrap onto a slot this pass already
     gave out (n ≥ ring size), is counted dropped."""
     h0, s0 = E.emitter_head[c], E.emitter_serial[c]
     size = (p_size + chunks - 1) // chunks
@@ -159,7 +161,13 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), p_
                         ti.atomic_add(E.dropped[c], 1)
                     else:
                         ti.atomic_add(E.emitter_emitted[c], 1)
-                        init_particle(E, S, slot, c, s0 + n, S.particle_pos[i], S.particle_vel[i])
+                        if bit == EVENT_COLLISION:  # born at the located impact, as old as it is
+                            lag = S.particle_impact_lag[i]
+                            init_particle(E, S, slot, c, s0 + n, S.particle_impact_pos[i], S.particle_vel[i])
+                            S.particle_pos[slot] += lag * S.particle_vel[slot]
+                            S.particle_age[slot] = lag
+                        else:
+                            init_particle(E, S, slot, c, s0 + n, S.particle_pos[i], S.particle_vel[i])
                 rank += 1
     total = 0
     for q in range(chunks):

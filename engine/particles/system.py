@@ -27,6 +27,7 @@ from .slots import save_positions
 
 H_MAX_FACTOR = 64  # an adaptive step may grow to 64 × the configured h
 MAX_RUN = 32  # fixed steps fused into one launch at most (a stop request waits for at most this many)
+EVENT_TOL = 0.01  # an adaptive step locates impacts to 1% of atol from the surface (fixed: to rounding)
 
 
 class ParticleSystem:
@@ -46,13 +47,14 @@ class ParticleSystem:
         self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state, rows)
         self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control, rows)
         self.colliders = colliders
-        collide = colliders.make_func(report=True) if colliders.count else None
-        self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), collide,
-                                             self.method, self.adaptive,
-                                             events=self.emitters.uses_events, contacts=contacts)
+        self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), colliders,
+                                             self.method, self.adaptive, sol.extrapolate,
+                                             events=self.emitters.uses_events, contacts=contacts,
+                                             impacts=sol.impacts, quadratic=self.forces.names == ["gravity"])
         self.order = METHODS[self.method].order
         atol = sol.atol if sol.atol is not None else sol.tolerance
         self.atol, self.rtol = atol, sol.tolerance
+        self.tol_g = EVENT_TOL * atol  # impacts located to this distance from the surface (m)
         self.driver = Driver(self, StepPolicy(
             h=sol.h, adaptive=self.adaptive, rtol=sol.tolerance, atol=atol, h_max=H_MAX_FACTOR * sol.h,
             max_steps=sol.max_steps_per_frame,
@@ -67,11 +69,13 @@ class ParticleSystem:
         self.driver.advance(t, t + dt)
 
     # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
-    def _move_colliders(self, t_end: float) -> bool:
-        """Put moving colliders where the control says they are at t_end; whether any moves."""
+    def _move_colliders(self, t: float, t_end: float) -> bool:
+        """Put moving colliders where the control says they are at t_end, moving since t (the
+        step's start); whether any moves."""
         moving = bool(self.colliders.count) and self.control.colliders_move
         if moving:
-            self.colliders.move_to(t_end, self.control.collider_positions(t_end))
+            ctl = self.control
+            self.colliders.move_to(t_end, ctl.collider_positions(t_end), since=(t, ctl.collider_positions(t)))
         return moving
 
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
@@ -83,7 +87,7 @@ class ParticleSystem:
         held, self._held = self._held, None
         self.emitters.spawn(held[1] if held is not None and held[0] == (t0, h, j) else self.emitters.plan(t, h))
         k = 1
-        if not self._move_colliders(t + h) and not self.emitters.uses_events:
+        if not self._move_colliders(t, t + h) and not self.emitters.uses_events:
             while j + k < min(n, j + MAX_RUN):
                 due = self.emitters.plan(t0 + (j + k) * h, h)
                 if due is not None:
@@ -101,10 +105,10 @@ class ParticleSystem:
 
     def attempt(self, t: float, h: float) -> float:
         self.emitters.emit(t, h)  # newborns wait (negative age) if the attempt is retried shorter
-        self._move_colliders(t + h)
+        self._move_colliders(t, t + h)
         if not self.layout.capacity:
             return 0.0
-        return float(integrate.attempt(self.integrator, t, h, self.atol, self.rtol))
+        return float(integrate.attempt(self.integrator, t, h, self.atol, self.rtol, self.tol_g))
 
     def commit(self, t: float, h: float) -> None:
         if self.layout.capacity:

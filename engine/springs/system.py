@@ -23,7 +23,7 @@ from ..contacts import ContactBuffer
 from ..control import ColliderInput, Control
 from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
-from ..ode.staged import FieldStepper, StagedDoubling
+from ..ode.staged import FieldStepper, StagedDoubling, copy_nodes
 from ..runtime import ensure_init
 from . import constraints
 from .energy import network_energy
@@ -82,9 +82,11 @@ class SpringSystem:
             self.stepper = FieldStepper(integrator, self.state.node_pos, self.state.node_vel, n, self.accel)
         self.order = self.stepper.order
         self.colliders = colliders
-        self._collide = (colliders.make_func(report=True) if colliders is not None and colliders.count
-                         else constraints.no_collision)
-        self.contact_log = ContactBuffer(contacts if self._collide is not constraints.no_collision else 0)
+        self._contacts = constraints.NodeContacts(colliders)
+        if self._contacts.on:  # the start of each step, for locating impacts in it
+            self._x0 = ti.Vector.field(3, dtype, max(1, n))
+            self._v0 = ti.Vector.field(3, dtype, max(1, n))
+        self.contact_log = ContactBuffer(contacts if self._contacts.on else 0)
         self._bad = ti.field(ti.f64, ())
         self._bad[None] = constraints.NO_FAILURE
         self._limits = DistanceLimits(self.model, self.state) if max_stretch is not None else None
@@ -142,21 +144,28 @@ class SpringSystem:
         if self.model.pinned_mask.any():
             constraints.pin_drive(self.model, self.state, self._alpha(t_end), h)
 
-    def _post(self, t_end: float) -> None:
+    def _post(self, t_end: float, h: float, x0, v0) -> None:
+        """After a step of h ending at t_end that started from (x0, v0): limits, colliders."""
         if self.model.node_count == 0:
             return
         if self._limits is not None:
             self._limits.apply(self.max_stretch, self.limit_iterations)
-        if self.colliders is not None and self.colliders.count and self.control.colliders_move:
-            self.colliders.move_to(t_end, self.control.collider_positions(t_end))
-        constraints.finalize(self.model, self.state, self._collide, self._bad, self._alpha(t_end), t_end,
-                             self.contact_log)
+        if self._contacts.on and self.control.colliders_move:
+            ctl = self.control
+            self.colliders.move_to(t_end, ctl.collider_positions(t_end),
+                                   since=(t_end - h, ctl.collider_positions(t_end - h)))
+        constraints.finalize(self.model, self.state, self._contacts, x0, v0, self._bad,
+                             self._alpha(t_end), t_end, h, self.contact_log)
 
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
         t = t0 + j * h
         self._drive_pins(h, t + h)
+        x0, v0 = self.state.node_pos, self.state.node_vel
+        if self._contacts.on and self.model.node_count:
+            copy_nodes(x0, v0, self._x0, self._v0, self.model.node_count)
+            x0, v0 = self._x0, self._v0
         self.stepper.step(h)
-        self._post(t + h)
+        self._post(t + h, h, x0, v0)
         return 1
 
     def first_nonfinite(self):
@@ -171,7 +180,7 @@ class SpringSystem:
                                       before=lambda hs, end: self._drive_pins(hs, t + end * h))
 
     def commit(self, t: float, h: float) -> None:
-        self._post(t + h)
+        self._post(t + h, h, self._doubling.x0, self._doubling.v0)
 
     def rollback(self) -> None:
         self._doubling.rollback()

@@ -54,7 +54,7 @@ def _cmd_ode(args) -> int:
 
 ARCH_CHOICES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
 PROBLEM_NAMES = ("growth", "decay", "oscillator", "projectile_drag", "damped_spring",
-                 "lotka-volterra", "kepler")
+                 "lotka-volterra", "kepler", "kepler-0.6", "arenstorf")
 T = flags.argtype
 THREADS = flags.integer(1, 1024)
 

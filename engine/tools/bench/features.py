@@ -7,6 +7,11 @@ alpha emitter beside the additive one); it has no spring bodies (the cloth row t
 and is timed per frame (step + tiled render) in the same process. The proof records the kernels
 each variant compiles (Taichi's ``Kernel.materialize``) and what was compiled into them: the
 force terms (``Forces.names``), collider code, the OIT (alpha) path, streak geometry.
+
+The last rows price located impacts (issue 14): the same scene with ``solver.impacts =
+"located"`` (each particle's impacts found in time inside the step) and ``"projected"`` (put
+back after the step), stepped only (no render), with the contacts per frame each one resolves
+(target: located costs at most 15% more per step at the same contacts).
 """
 from __future__ import annotations
 
@@ -145,4 +150,38 @@ def run(quick: bool = False):
         rows.append(Row(sec, name, t * 1e3, "ms/frame",
                         f"{note}; {len(kernels)} kernels compiled; {_what_compiled(scene)}",
                         {"kernels": kernels}))
+    return rows + impacts_rows(n, repeats)
+
+
+def impacts_rows(n: int, repeats: int, rounds: int = 5):
+    """Per-step cost of located impacts against projected ones on the base scene (step only):
+    both scenes built first, then timed in alternating rounds (``repeats`` frames each), the
+    fastest round of each kept — other load on the machine falls on both alike."""
+    from .frame import build_scene
+
+    sec = f"located impacts against projected, {n // 1000}k particles, step only"
+    scenes, best, seen = {}, {}, {}
+    for impacts in ("projected", "located"):
+        cfg = base_config(n)
+        cfg["solver"]["impacts"] = impacts
+        scenes[impacts] = build_scene(n, width=W, height=H, config=cfg)
+        scenes[impacts].advance_frame()  # compile
+        best[impacts] = float("inf")
+    for _ in range(rounds):
+        for impacts, scene in scenes.items():
+            I = scene.particles.integrator
+            h0, s0 = int(I.hits[None]), scene.stats.steps
+            t = time_median(scene.advance_frame, repeats, warmup=0)
+            steps = (scene.stats.steps - s0) / repeats
+            seen[impacts] = ((int(I.hits[None]) - h0) / repeats, steps)
+            best[impacts] = min(best[impacts], t / steps)
+    rows = []
+    for impacts in scenes:
+        contacts, steps = seen[impacts]
+        note = f"{contacts:,.0f} contacts/frame, {steps:.0f} steps/frame; fastest of {rounds} alternating rounds"
+        extra = {"contacts_per_frame": contacts}
+        if impacts == "located":
+            extra["ratio"] = best["located"] / best["projected"]
+            note += f"; x{extra['ratio']:.2f} of projected (target <= 1.15)"
+        rows.append(Row(sec, f"impacts {impacts}", best[impacts] * 1e3, "ms/step", note, extra))
     return rows

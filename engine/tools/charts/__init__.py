@@ -5,7 +5,8 @@
 * ``workprec_<problem>.csv/.png`` — work–precision diagrams (error at T against f-evaluations and
   wall time) for projectile_drag, damped_spring, lotka-volterra and kepler;
 * ``stability.csv/.png`` — largest stable h against spring stiffness, measured and predicted;
-* ``energy_drift.csv/.png`` — relative energy error over a long fixed-step run.
+* ``energy_drift.csv/.png`` — relative energy error over a long fixed-step run;
+* ``bounce.csv/.png`` — the dropped ball's error with impacts located in time and projected.
 
 Needs the ``chart`` extra (matplotlib, scipy): ``pip install -e ".[chart]"``.
 """
@@ -14,7 +15,7 @@ import os
 import sys
 from typing import Iterable, List, Optional, Union
 
-CHARTS = ("workprec", "stability", "energy", "scenes")
+CHARTS = ("workprec", "stability", "energy", "scenes", "bounce")
 # NUMERICS.md's work–precision figures, drawn over the matching charts as × markers
 _NUMERICS_REFS = {
     "lotka-volterra": [
@@ -110,6 +111,15 @@ def _jobs(names, out_dir, quick):
                                                "sparks fountain, T = 1 s, colliders")))
         jobs.append(("scene cloth", scene_job("cloth", cloth_rows,
                                               "16×16 cloth pinned at two corners, T = 1 s")))
+    if "bounce" in names:
+        def bounce_job():
+            from .bounce import FIELDS as BFIELDS
+            from .bounce import bounce_png, bounce_rows
+
+            rows = bounce_rows(quick=quick)
+            base = os.path.join(out_dir, "bounce")
+            return [plot.write_csv(base + ".csv", rows, BFIELDS), bounce_png(base + ".png", rows)]
+        jobs.append(("bounce", bounce_job))
     if "stability" in names:
         def stability_job():
             from .stability import NUMERICS_TABLE, stability_rows

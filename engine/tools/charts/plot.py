@@ -9,7 +9,7 @@ from ...render.output import replacing
 
 COLORS = {"euler": "tab:red", "midpoint": "tab:orange", "rk4": "tab:blue",
           "rk4+extrap": "tab:cyan", "symplectic_euler": "tab:green", "verlet": "tab:purple",
-          "scipy RK45": "0.45", "scipy DOP853": "black"}
+          "scipy RK45": "0.45", "scipy DOP853": "black", "rk4 projected": "tab:brown"}
 MODE_STYLE = {"fixed": dict(ls="-", marker="o", ms=4), "adaptive": dict(ls="--", marker="s", ms=4),
               "scipy": dict(ls=":", marker="^", ms=5)}
 

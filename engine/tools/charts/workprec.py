@@ -15,7 +15,7 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 
 from ...ode import INTEGRATORS, METHODS, solve
-from ..problems import DAMPED_SPRING, DRAG, KEPLER, LOTKA_VOLTERRA, Problem
+from ..problems import ARENSTORF, DAMPED_SPRING, DRAG, KEPLER, KEPLER_06, LOTKA_VOLTERRA, Problem
 
 FIELDS = ["problem", "method", "mode", "h_or_tol", "nfev", "wall_s", "error"]
 FIXED_METHODS = list(INTEGRATORS)
@@ -49,6 +49,17 @@ def _kepler_np(t, y):
     return np.array([y[2], y[3], -y[0] / r3, -y[1] / r3])
 
 
+_MU = 0.012277471
+
+
+def _arenstorf_np(t, y):
+    nu = 1 - _MU
+    d1 = ((y[0] + _MU) ** 2 + y[1] ** 2) ** 1.5
+    d2 = ((y[0] - nu) ** 2 + y[1] ** 2) ** 1.5
+    return np.array([y[2], y[3], y[0] + 2 * y[3] - nu * (y[0] + _MU) / d1 - _MU * (y[0] - nu) / d2,
+                     y[1] - 2 * y[2] - nu * y[1] / d1 - _MU * y[1] / d2])
+
+
 @dataclass(frozen=True)
 class Case:
     problem: Problem
@@ -62,11 +73,15 @@ CASES: Dict[str, Case] = {c.problem.name: c for c in (
     Case(DAMPED_SPRING, _spring_np, tuple(2 ** k for k in range(4, 19))),
     Case(LOTKA_VOLTERRA, _lv_np, tuple(2 ** k for k in range(4, 19))),
     Case(KEPLER, _kepler_np, tuple(2 ** k for k in range(6, 20))),
+    Case(KEPLER_06, _kepler_np, tuple(2 ** k for k in range(6, 19))),
+    Case(ARENSTORF, _arenstorf_np, tuple(2 ** k for k in range(10, 20))),
 )}
 QUICK_TOLS = (1e-3, 1e-5, 1e-7, 1e-10)  # the tolerances of NUMERICS.md's table
 FULL_TOLS = tuple(10.0 ** -k for k in range(2, 11))
 
-T_LABEL = {KEPLER.name: "T = 2π, one period"}
+T_LABEL = {KEPLER.name: "e = 0.9, T = 2π, one period", KEPLER_06.name: "e = 0.6, T = 2π, one period",
+           ARENSTORF.name: "T = 17.065, one period"}
+PERIODIC = (KEPLER.name, KEPLER_06.name, ARENSTORF.name)  # the reference at T is the initial state
 _ref_cache: dict = {}
 
 
@@ -85,7 +100,7 @@ def _timed(fn, repeats=3):
 
 def reference_end(case: Case) -> np.ndarray:
     p = case.problem
-    if p.exact is not None or p.name == KEPLER.name:
+    if p.exact is not None or p.name in PERIODIC:
         return p.y_end()
     if p.name not in _ref_cache:
         integ = require_scipy()
@@ -174,3 +189,19 @@ def fixed_slope(rows: List[dict], method: str, lo: float = 1e-11, hi: float = 1e
         return math.nan
     x, y = np.log10(np.array(pts, dtype=np.float64)).T
     return float(np.polyfit(x, y, 1)[0])
+
+
+def equal_error_ratio(rows: List[dict], method: str, anchor: str = "scipy RK45") -> List[tuple]:
+    """(error, nfev ratio) for each adaptive point of ``method``: its f-evaluations over the
+    anchor's at the same error (the anchor's log nfev interpolated linearly in log error between
+    its two points around it; points outside the anchor's range are left out)."""
+    a = sorted((r["error"], r["nfev"]) for r in rows if r["method"] == anchor and r["error"] > 0)
+    if len(a) < 2:
+        return []
+    le, ln = np.log10([e for e, _ in a]), np.log10([n for _, n in a])
+    out = []
+    for r in rows:
+        if r["method"] == method and r["mode"] == "adaptive" and le[0] <= math.log10(r["error"]) <= le[-1]:
+            n_anchor = 10 ** float(np.interp(math.log10(r["error"]), le, ln))
+            out.append((r["error"], r["nfev"] / n_anchor))
+    return out
