@@ -15,6 +15,8 @@ from typing import Optional, Tuple
 
 from hypothesis import strategies as st
 
+from engine.tools.wedge.tomlout import toml_key as _key, toml_value as _value
+
 DELETE = object()
 
 BASE = {
@@ -273,45 +275,8 @@ mutation = st.one_of(unknown_key(), wrong_type(), out_of_range(), bad_enum(), st
 malformed = st.lists(mutation, min_size=1, max_size=4).map(combine)
 
 
-# -- TOML writer --------------------------------------------------------------------------------
-def _string(s: str) -> str:
-    out = ['"']
-    for ch in s:
-        if ch in '"\\':
-            out.append("\\" + ch)
-        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
-            out.append(f"\\u{ord(ch):04X}")
-        else:
-            out.append(ch)
-    return "".join(out) + '"'
-
-
-def _key(k: str) -> str:
-    import re
-
-    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _string(k)
-
-
-def _value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, str):
-        return _string(v)
-    if isinstance(v, datetime.date):
-        return v.isoformat()
-    if isinstance(v, list):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
-    raise TypeError(type(v))
+# -- TOML writer (keys and values as the wedge writes them; tables laid out like a hand-written
+# config) --------------------------------------------------------------------------------------
 
 
 def to_toml(d: dict) -> str:

@@ -73,6 +73,16 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
     return written
 
 
+def _chart(out_dir, stem, rows, fields, draw):
+    """Write ``rows`` to ``<stem>.csv`` (``fields``, or the first row's keys) and draw
+    ``<stem>.png`` with ``draw(path, rows)``; the two paths written."""
+    from . import plot
+
+    base = os.path.join(out_dir, stem)
+    return [plot.write_csv(base + ".csv", rows, fields if fields is not None else list(rows[0])),
+            draw(base + ".png", rows)]
+
+
 def _jobs(names, out_dir, quick):
     """(label, job) per chart: each job computes its rows and returns the files it wrote."""
     from . import plot
@@ -82,13 +92,12 @@ def _jobs(names, out_dir, quick):
 
     def workprec_job(name):
         def job():
-            rows = work_precision(name, quick=quick)
             T = T_LABEL.get(name, f"T = {CASES[name].problem.t_span[1]:g}")
-            base = os.path.join(out_dir, f"workprec_{name}")
             title = (f"Work–precision, {name} ({T}): fixed h for every method, step doubling over "
                      f"tol = rtol (atol = tol·1e-3), scipy solve_ivp as anchor")
-            return [plot.write_csv(base + ".csv", rows, FIELDS),
-                    plot.work_precision_png(base + ".png", rows, title, _NUMERICS_REFS.get(name, ()))]
+            return _chart(out_dir, f"workprec_{name}", work_precision(name, quick=quick), FIELDS,
+                          lambda png, rows: plot.work_precision_png(png, rows, title,
+                                                                    _NUMERICS_REFS.get(name, ())))
         return job
 
     for name in CASES:
@@ -99,12 +108,10 @@ def _jobs(names, out_dir, quick):
 
         def scene_job(name, fn, what):
             def job():
-                rows = fn(quick=quick)
-                base = os.path.join(out_dir, f"workprec_scene_{name}")
-                return [plot.write_csv(base + ".csv", rows, FIELDS),
-                        plot.work_precision_png(
-                            base + ".png", rows, f"Work–precision on a real scene: {what}; error "
-                            f"against the same scene at a much smaller h (RK4)")]
+                title = (f"Work–precision on a real scene: {what}; error against the same scene "
+                         f"at a much smaller h (RK4)")
+                return _chart(out_dir, f"workprec_scene_{name}", fn(quick=quick), FIELDS,
+                              lambda png, rows: plot.work_precision_png(png, rows, title))
             return job
 
         jobs.append(("scene sparks", scene_job("sparks", sparks_rows,
@@ -116,27 +123,21 @@ def _jobs(names, out_dir, quick):
             from .bounce import FIELDS as BFIELDS
             from .bounce import bounce_png, bounce_rows
 
-            rows = bounce_rows(quick=quick)
-            base = os.path.join(out_dir, "bounce")
-            return [plot.write_csv(base + ".csv", rows, BFIELDS), bounce_png(base + ".png", rows)]
+            return _chart(out_dir, "bounce", bounce_rows(quick=quick), BFIELDS, bounce_png)
         jobs.append(("bounce", bounce_job))
     if "stability" in names:
         def stability_job():
             from .stability import NUMERICS_TABLE, stability_rows
 
-            rows = stability_rows(quick=quick)
-            base = os.path.join(out_dir, "stability")
-            return [plot.write_csv(base + ".csv", rows, list(rows[0])),
-                    plot.stability_png(base + ".png", rows, NUMERICS_TABLE)]
+            return _chart(out_dir, "stability", stability_rows(quick=quick), None,
+                          lambda png, rows: plot.stability_png(png, rows, NUMERICS_TABLE))
         jobs.append(("stability", stability_job))
     if "energy" in names:
         def energy_job():
             from .energy import H, TITLES, energy_drift
 
-            rows = energy_drift(quick=quick)
-            base = os.path.join(out_dir, "energy_drift")
-            return [plot.write_csv(base + ".csv", rows, list(rows[0])),
-                    plot.energy_png(base + ".png", rows, H, TITLES)]
+            return _chart(out_dir, "energy_drift", energy_drift(quick=quick), None,
+                          lambda png, rows: plot.energy_png(png, rows, H, TITLES))
         jobs.append(("energy drift", energy_job))
     return jobs
 

@@ -7,6 +7,7 @@ refuses a table it would not write faithfully.
 """
 from __future__ import annotations
 
+import datetime
 import json
 import math
 import re
@@ -20,17 +21,21 @@ else:  # pragma: no cover
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
 
 
-def _key(k) -> str:
+def toml_key(k) -> str:
+    """A key: bare where TOML allows it, else quoted."""
     k = str(k)
     return k if _BARE.fullmatch(k) else _string(k)
 
 
 def _string(s: str) -> str:
-    # a JSON string is a TOML basic string, given no surrogate escapes (ensure_ascii=False)
-    return json.dumps(s, ensure_ascii=False)
+    # a JSON string is a TOML basic string, given no surrogate escapes (ensure_ascii=False) and
+    # DEL escaped (JSON leaves it raw; TOML does not allow it in a basic string)
+    return json.dumps(s, ensure_ascii=False).replace("\x7f", "\\u007F")
 
 
-def _value(v) -> str:
+def toml_value(v) -> str:
+    """A value inline: numbers (nan and ±inf as TOML writes them), strings, booleans, dates,
+    lists and tables. The tests' config fuzzer writes malformed configs with it too."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -41,17 +46,19 @@ def _value(v) -> str:
         return repr(v)
     if isinstance(v, str):
         return _string(v)
+    if isinstance(v, datetime.date):
+        return v.isoformat()
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
     if isinstance(v, dict):
-        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
+        return "{" + ", ".join(f"{toml_key(k)} = {toml_value(x)}" for k, x in v.items()) + "}"
     raise ValueError(f"cannot write {type(v).__name__} {v!r} as TOML")
 
 
 def dumps(data: dict) -> str:
     """``data`` (what ``tomllib`` reads: tables, lists, strings, numbers, booleans) as TOML text;
     ValueError if it does not read back equal (a date, a NaN)."""
-    text = "".join(f"{_key(k)} = {_value(v)}\n" for k, v in data.items())
+    text = "".join(f"{toml_key(k)} = {toml_value(v)}\n" for k, v in data.items())
     if tomllib.loads(text) != data:
         raise ValueError("the table does not read back equal from TOML")
     return text
