@@ -113,6 +113,7 @@ def bad_calls():
     return out
 
 
+@pytest.mark.slow
 def test_every_method_refuses_bad_arguments_in_one_line_and_changes_nothing():
     s = mixed_scene()
     s.step(1 / 60)

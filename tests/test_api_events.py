@@ -28,6 +28,7 @@ def rows(c):
     return sorted(zip(c.time.tolist(), c.slot.tolist(), c.collider.tolist(), c.speed.tolist()))
 
 
+@pytest.mark.slow
 def test_contacts_drain_every_step_since_the_last_call_and_restarts_compile_nothing():
     """One drain per 1/60 s frame with 1/120 s steps gets exactly the contacts of draining after
     every step; the second run is the first scene reused (reset), so it also pins that a restart
@@ -68,6 +69,7 @@ def test_contacts_drain_every_step_since_the_last_call_and_restarts_compile_noth
     assert reuse.idle(key) == idle + 1
 
 
+@pytest.mark.slow
 def test_contact_buffer_overflow_is_counted_not_written_over():
     s = ParticleScene(RAIN, contacts=16, render=False)
     for _ in range(30):
@@ -187,6 +189,7 @@ def test_a_new_render_size_and_a_warmed_up_scene_compile_nothing():
     assert compiled() == before
 
 
+@pytest.mark.slow
 def test_add_emitter_of_a_compiled_kind_writes_spare_rows_and_a_restart_takes_it_away():
     data = dict(fps=60, render={"width": 48, "height": 32},
                 emitters=[{"name": "e", "effect": "sparks", "rate": 200.0}])

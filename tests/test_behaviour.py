@@ -30,7 +30,7 @@ def assert_same_particles(got, want):
         np.testing.assert_allclose(got[key], want[key], err_msg=key, **TOL)
 
 
-@pytest.mark.parametrize("name", quick(sorted(FRAME_SHOTS), keep={"sparks", "sub_emitters"}))
+@pytest.mark.parametrize("name", quick(sorted(FRAME_SHOTS), keep={"sub_emitters"}))
 def test_particle_frames_kept(name):
     want = fixture(f"frames_{name}")
     assert len(want["slot"]) > 50

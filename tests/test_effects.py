@@ -11,7 +11,7 @@ from engine.particles.curves import Curves
 from engine.particles.noise import curl_noise
 from engine.particles.pool import PARTICLE_FIELDS
 from engine.scene import Scene
-from helpers import quick, scene_dict
+from helpers import scene_dict
 
 GOLDEN = os.path.join(os.path.dirname(__file__), "golden")
 
@@ -155,7 +155,8 @@ def render_small(name, frames):
     return s.render()[..., :3]
 
 
-@pytest.mark.parametrize("name", quick(sorted(GOLDEN_SHOTS), keep={"campfire"}))
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(GOLDEN_SHOTS))
 def test_golden_image(name):
     """A tiny render of each effect against a stored one, so a change to the look is seen.
     Regenerate after an intended change: python tests/make_golden.py"""

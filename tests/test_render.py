@@ -103,6 +103,7 @@ def test_new_sizes_cameras_and_overlays_compile_nothing():
     assert np.array_equal(s.render(200, 100), first) and _compiled(r) == before
 
 
+@pytest.mark.slow
 def test_background_is_redrawn_when_camera_or_colliders_move():
     s = _scene("configs/sparks.toml", frames=5)
     first = s.render()

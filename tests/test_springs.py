@@ -154,6 +154,7 @@ def test_guard_refuses_stiff_cloth_and_forced_run_diverges():
     assert forced.time < 5.0
 
 
+@pytest.mark.slow
 def test_xpbd_stiff_cloth_stable_at_frame_rate():
     sys = SpringSystem(_stiff_cloth(), integrator="xpbd", xpbd_iterations=20, substeps=2)
     for _ in range(45):
@@ -176,6 +177,7 @@ def test_auto_substeps_keep_symplectic_euler_stable():
 
 
 # -- collisions ----------------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["xpbd", "symplectic_euler"])
 def test_cloth_drapes_over_sphere_without_penetration(integrator):
     centre, R = np.array([0.5, 0.0, 0.5]), 0.25
