@@ -10,11 +10,11 @@ from __future__ import annotations
 import argparse
 import math
 
+from ..ode.methods import INTEGRATORS  # the one list of names (no Taichi behind it)
 from .budget import parse_bytes
 from .errors import UserError
 
 MAX_SIDE = 8192  # as render.width / render.height
-INTEGRATORS = ("euler", "midpoint", "rk4", "symplectic_euler", "verlet")
 
 
 class FlagError(ValueError):
