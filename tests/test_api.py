@@ -35,6 +35,7 @@ def test_moving_sphere_pushes_particles_and_none_end_inside():
     assert np.abs(np.median(moved[~swept])) < 0.02  # the rest stays put
 
 
+@pytest.mark.slow
 def test_variable_frame_times_give_the_same_state_as_fixed_frames():
     def run(frame_times):
         s = ParticleScene.from_file("configs/sparks.toml", render=False)
@@ -71,6 +72,7 @@ def test_burst_from_code_adds_exactly_its_count():
     assert abs(len(s.particles()["position"]) - (777 + 300)) <= 1
 
 
+@pytest.mark.slow
 def test_contacts_report_colliders_normals_and_speeds():
     s = (SceneBuilder(seed=1, fps=60).forces(gravity=[0.0, -9.81, 0.0])
          .emitter(name="rain", shape="box", box_size=[2.0, 0.1, 2.0], position=[0.0, 2.0, 0.0],

@@ -80,6 +80,7 @@ def test_contact_buffer_overflow_is_counted_not_written_over():
     assert np.all(np.diff(c.time) >= 0)
 
 
+@pytest.mark.slow
 def test_soft_body_node_contacts_when_the_body_asks():
     s = (SceneBuilder(fps=60).forces(gravity=[0.0, -9.81, 0.0])
          .collider(type="sphere", name="rock", center=[0.0, 0.0, 0.0], radius=0.5)

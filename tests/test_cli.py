@@ -36,7 +36,8 @@ def load(path):
     return np.asarray(Image.open(path).convert("RGB"))
 
 
-@pytest.mark.parametrize("config", quick(["sparks", "dust"], keep={"sparks"}))
+@pytest.mark.slow
+@pytest.mark.parametrize("config", ["sparks", "dust"])
 def test_run_renders_non_blank_frames(tmp_path, config):
     out = tmp_path / config
     r = particles("run", f"configs/{config}.toml", "--frames", "12", "--out", str(out), "--quiet",

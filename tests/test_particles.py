@@ -8,7 +8,7 @@ import taichi as ti
 from engine.colliders import ColliderSpec, Colliders
 from engine.config import load_config
 from engine.scene import Scene
-from helpers import quick, scene_dict
+from helpers import scene_dict
 
 
 def make(d, render=False):
@@ -148,7 +148,8 @@ def test_single_particle_with_drag_matches_closed_form_rk4():
     assert np.abs(x - exact).max() < 2e-5 * max(1.0, np.abs(exact).max())  # float32 precision
 
 
-@pytest.mark.parametrize("integrator", quick(["euler", "midpoint", "rk4", "symplectic_euler", "verlet"], keep={"rk4"}))
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator", ["euler", "midpoint", "rk4", "symplectic_euler", "verlet"])
 def test_every_integrator_runs_a_scene(integrator):
     d = scene_dict(frames=1, solver={"integrator": integrator, "h": 1 / 120},
                    forces={"gravity": [0.0, -9.81, 0.0], "drag": 0.3},
