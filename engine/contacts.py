@@ -79,8 +79,8 @@ def drain(count, slot, collider, pos, normal, speed, time, capacity: int, names=
 
 @ti.data_oriented
 class ContactBuffer:
-    """Device-side contact records for a soft body's nodes (the particle pool keeps its own in
-    its integrator): ``capacity`` rows; ``enabled`` False compiles the recording out."""
+    """Device-side contact records, for a particle pool (its integrator's ``contact_log``) and a
+    soft body's nodes alike: ``capacity`` rows; ``enabled`` False when nothing records."""
 
     def __init__(self, capacity: int):
         self.capacity = int(capacity)

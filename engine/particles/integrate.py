@@ -15,6 +15,7 @@ stepper, forces and colliders are compile-time parts of it), warp.sim style; the
 """
 import taichi as ti
 
+from ..contacts import ContactBuffer
 from ..ode.events import doubling_error, fixed_error, located_step
 from ..ode.steppers import doubling_step, is_finite, make_step, scaled_error
 
@@ -67,7 +68,7 @@ class ParticleIntegrator:
     order in h, the cheapest). Both hold contact at rest with the colliders' projection.
     ``quadratic``: the acceleration is constant over a step (gravity only): a plane's impact time
     is a closed form. With ``contacts`` > 0 up to that many contacts between drains are recorded in
-    ``contact_*`` fields (slot, collider, position, normal, impact speed, time: the located time
+    ``contact_log`` (an engine.contacts.ContactBuffer) (slot, collider, position, normal, impact speed, time: the located time
     and position of the step's fastest impact); without, the unused outputs are dead code. With
     ``events`` each step records in ``particle_event`` who died (bit 1) or hit a collider (bit 2,
     |Δv| in ``particle_impact``, where and how long before the step's end in
@@ -88,15 +89,8 @@ class ParticleIntegrator:
         self.located = self.has_colliders and impacts == "located"
         self.events = bool(events)
         self.record = bool(contacts) and self.has_colliders
-        self.max_contacts = int(contacts)
-        cn = max(1, int(contacts))
-        self.contact_count = ti.field(ti.i32, shape=())
-        self.contact_slot = ti.field(ti.i32, shape=cn)
-        self.contact_collider = ti.field(ti.i32, shape=cn)
-        self.contact_pos = ti.Vector.field(3, ti.f32, shape=cn)
-        self.contact_normal = ti.Vector.field(3, ti.f32, shape=cn)
-        self.contact_speed = ti.field(ti.f32, shape=cn)
-        self.contact_time = ti.field(ti.f32, shape=cn)
+        # the records the API drains (engine.contacts: slot, collider, located position and time)
+        self.contact_log = ContactBuffer(int(contacts) if self.record else 0)
         deriv, deriv_q = particle_derivative(accel)
         self.step = make_step(method, deriv, 8, ti.f32, fq=deriv_q)
         self.dstep = doubling_step(method, deriv, 8, ti.f32, extrapolate, fq=deriv_q) if adaptive else None
@@ -146,11 +140,8 @@ class ParticleIntegrator:
                 if k >= 0:  # one contact per particle and step: its fastest (records = hits)
                     ti.atomic_add(self.hits[None], 1)
                     if ti.static(self.record):
-                        c = ti.atomic_add(self.contact_count[None], 1)  # order fixed later by (time, slot)
-                        if c < self.max_contacts:
-                            self.contact_slot[c], self.contact_collider[c], self.contact_pos[c] = i, k, xh
-                            self.contact_normal[c], self.contact_speed[c] = nh, speed
-                            self.contact_time[c] = t_end - lag
+                        # any thread order: the drain sorts by (time, slot)
+                        self.contact_log.record(i, k, xh, nh, speed, t_end - lag)
                     if ti.static(self.events):
                         S.particle_event[i] |= 2
                         S.particle_impact[i] = dv

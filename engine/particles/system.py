@@ -14,7 +14,7 @@ import copy
 
 import numpy as np
 
-from ..contacts import Contacts, drain
+from ..contacts import Contacts
 from ..ode.driver import Driver, StepPolicy
 from ..ode.methods import METHODS
 from . import integrate
@@ -168,7 +168,7 @@ class ParticleSystem:
         self.emitters.reset()
         I = self.integrator
         I.nonfinite_t[None] = NO_FAILURE
-        I.contact_count[None] = 0
+        I.contact_log.count[None] = 0
         I.hits[None] = 0
         self.driver.reset()
         self._alive, self._held = None, None
@@ -195,8 +195,7 @@ class ParticleSystem:
         I = self.integrator
         if not I.record:
             return Contacts.empty(names)
-        return drain(I.contact_count, I.contact_slot, I.contact_collider, I.contact_pos, I.contact_normal,
-                     I.contact_speed, I.contact_time, I.max_contacts, names)
+        return I.contact_log.drain(names)
 
     def carry_from(self, old: "ParticleSystem") -> None:
         """Copy each named emitter's ring (particles, head, serial, clock) from ``old`` (the same
