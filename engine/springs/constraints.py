@@ -83,8 +83,9 @@ def finalize(model: ti.template(), state: ti.template(), contacts: ti.template()
                 dt = contacts.dtype
                 hh = ti.cast(h, dt)
                 xs, vs, xa, va = ti.cast(x, dt), ti.cast(v, dt), ti.cast(x0[i], dt), ti.cast(v0[i], dt)
-                acc = 2.0 * (xs - xa - hh * va) / (hh * hh)
-                y0 = ti.Vector([xa[0], xa[1], xa[2], acc[0], acc[1], acc[2], va[0], va[1], va[2], 0.0, 0.0, 0.0], dt=dt)
+                acc = 2.0 * (hh * vs - (xs - xa)) / (hh * hh)
+                u = vs - hh * acc
+                y0 = ti.Vector([xa[0], xa[1], xa[2], acc[0], acc[1], acc[2], u[0], u[1], u[2], 0.0, 0.0, 0.0], dt=dt)
                 y, _err, count, which, lag, xh, nh, speed, _dv, _stop = contacts.locate(
                     y0, ti.cast(t_end - h, dt), hh, i, 1.0, 1.0, 0.0)
                 if count > 0:  # an impact located on the path: the node as the events left it
