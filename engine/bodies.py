@@ -1,4 +1,5 @@
-"""Soft bodies in a scene: config → topology → :class:`~engine.springs.SpringSystem`."""
+"""Soft bodies in a scene: config → topology → :class:`~engine.springs.SpringSystem`, each a system
+of the scene (:mod:`engine.system`)."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,6 +11,7 @@ from .colliders import Colliders
 from .paths import sample_path
 from .springs import SpringSystem, chain, cloth, hair, jelly, line_roots, scalp_roots
 from .springs.topology import STRUCTURAL
+from .system import SystemBase
 
 
 def build_topology(b):
@@ -51,7 +53,7 @@ def _thickened(specs, d):
     return Colliders(out, shift)
 
 
-class Body:
+class SoftBody(SystemBase):
     """One soft body of a scene: its spring system, its own colliders (the scene's, thickened,
     at the positions the scene's control gives: a moving collider infers its velocity from its
     own updates) and what the renderer draws."""
@@ -60,6 +62,7 @@ class Body:
         """``contacts``: node–collider records kept between drains when the body's config asks
         (``contacts = true``)."""
         self.cfg, self.index = cfg, index
+        self.name = cfg.name or f"soft_bodies[{index}]"
         self.topology = build_topology(cfg)
         n = self.topology.node_count
         bad = [p for p in (cfg.pins if isinstance(cfg.pins, list) else []) if p >= n]
@@ -81,6 +84,27 @@ class Body:
         self.triangles = self.topology.triangles if cfg.type in ("cloth", "jelly") else np.zeros((0, 3), np.int32)
         self.lines = (self.system.lines((STRUCTURAL,)) if cfg.type in ("chain", "hair")
                       else np.zeros((0, 2), np.int32))
+
+    kind = "soft_body"
+
+    def advance(self, t0: float, t1: float) -> None:
+        """Step from t0 to exactly t1 (the System protocol)."""
+        self.step(t0, t1 - t0)
+
+    @property
+    def stats(self):
+        """This body's own step counts (:class:`~engine.ode.driver.DriverStats`)."""
+        return self.system.driver.stats
+
+    def drawables(self) -> dict:
+        return dict(kind="mesh", positions=self.positions, triangles=self.triangles, lines=self.lines,
+                    color=self.cfg.color)
+
+    def energy(self) -> dict:
+        return self.system.energy()
+
+    def contacts(self, names=()):
+        return self.system.contact_log.drain(names)
 
     def step(self, t0: float, dt: float) -> None:
         """Advance from t0 by dt: pins follow their path, let go at ``release_at``, then take the
@@ -109,3 +133,6 @@ class Body:
 
     def positions(self) -> np.ndarray:
         return self.system.positions()
+
+
+Body = SoftBody  # the name before soft bodies had their own (kept for callers)

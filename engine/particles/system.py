@@ -15,6 +15,7 @@ import copy
 import numpy as np
 
 from ..contacts import Contacts
+from ..system import SystemBase
 from ..ode.driver import Driver, StepPolicy
 from ..ode.methods import METHODS
 from . import integrate
@@ -30,7 +31,12 @@ MAX_RUN = 32  # fixed steps fused into one launch at most (a stop request waits 
 EVENT_TOL = 0.01  # an adaptive step locates impacts to 1% of atol from the surface (fixed: to rounding)
 
 
-class ParticleSystem:
+class ParticleSystem(SystemBase):
+    """The particle pool as a system of the scene (engine.system): ``kind`` particles."""
+
+    kind = "particles"
+    name = "particles"
+
     def __init__(self, cfg, colliders, control, stats, contacts: int = 0, interpolate: bool = False,
                  spare=(0, 0)):
         """``spare``: (emitter rows, pool slots) allocated beyond the config's, so emitters can be
@@ -62,11 +68,11 @@ class ParticleSystem:
         self._alive = None  # the live count, read back when first asked after an advance
         self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
 
-    def advance(self, t: float, dt: float) -> None:
-        """Advance from t by dt seconds (any length), landing exactly on t + dt. Contact records
-        accumulate until :meth:`contacts` drains them."""
+    def advance(self, t0: float, t1: float) -> None:
+        """Advance from t0 to exactly t1 (the System protocol, engine.scene.system). Contact
+        records accumulate until :meth:`contacts` drains them."""
         self._alive = None
-        self.driver.advance(t, t + dt)
+        self.driver.advance(t0, t1)
 
     # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
     def _move_colliders(self, t: float, t_end: float) -> bool:

@@ -14,12 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import runtime
-from .colliders import ColliderSpec, Colliders
-from .control import Control
-from .ode.driver import DriverStats, SimulationDiverged
-from .particles.system import ParticleSystem
-from .render.camera import Camera
+from .. import runtime
+from ..colliders import ColliderSpec, Colliders
+from ..control import Control
+from ..ode.driver import DriverStats, SimulationDiverged
+from ..particles.system import ParticleSystem
+from ..render.camera import Camera
+from .coupler import Coupler
 
 DivergenceError = SimulationDiverged  # the name the command line catches (exit 3): the same class
 __all__ = ["Scene", "SimulationDiverged", "DivergenceError", "Stats", "collider_specs"]
@@ -80,7 +81,7 @@ class Scene:
             self.particles.carry_from(previous.particles)
         self.bodies = []
         if cfg.bodies:
-            from .bodies import Body
+            from ..bodies import SoftBody
 
             same_colliders = previous is not None and previous.cfg.colliders == cfg.colliders
             keep = {b.cfg.name: b for b in (previous.bodies if same_colliders else []) if b.cfg.name}
@@ -90,11 +91,12 @@ class Scene:
                     old.use_control(self.control)
                     self.bodies.append(old)
                 else:
-                    self.bodies.append(Body(b, specs, self.control, cfg.solver.integrator, k, contacts))
+                    self.bodies.append(SoftBody(b, specs, self.control, cfg.solver.integrator, k, contacts))
+        self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies)
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
-            from .render.renderer import Renderer
+            from ..render.renderer import Renderer
 
             p = self.particles
             self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
@@ -105,11 +107,9 @@ class Scene:
     # -- stepping -----------------------------------------------------------------------------
     def advance(self, dt: float) -> None:
         """Advance everything by dt seconds (any length), landing exactly on t + dt."""
-        if self.particles is not None:
-            self.particles.advance(self.t, dt)
-        for body in self.bodies:
-            body.step(self.t, dt)
-        self.t += dt
+        t1 = self.t + dt
+        self.coupler.advance(self.t, t1)
+        self.t = t1
 
     def why_not_add(self, cfg):
         """Why the emitters ``cfg`` appends to this scene's config cannot be added in place
@@ -200,6 +200,16 @@ class Scene:
                                     bgra=bgra, blend=1.0 if alpha is None else float(alpha))
 
     # -- read-back ----------------------------------------------------------------------------
+    @property
+    def systems(self) -> list:
+        """The scene's systems in coupling order (engine.system)."""
+        return list(self.coupler.systems)
+
+    def system_stats(self) -> dict:
+        """{system name: its own step counts}: the particle pool's (``stats``) and each soft
+        body's driver statistics."""
+        return {s.name: s.stats for s in self.coupler.systems}
+
     @property
     def capacity(self) -> int:
         return self.particles.layout.capacity if self.particles else 0
