@@ -28,7 +28,7 @@ import numpy as np
 
 from . import checks, reuse
 from .budget import fit, hold, particle_budget, release, set_particle_budget
-from .builder import SceneBuilder
+from .builder import ConfigBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
 from .particles.capacity import MAX_POOL
 from .clock import FixedTimestep
@@ -407,3 +407,11 @@ class ParticleScene:
 
     def remove_body(self, name: str) -> None:
         self._remove("remove_body", "bodies", self._body("remove_body", name).cfg.name)
+
+
+class SceneBuilder(ConfigBuilder):
+    __doc__ = ConfigBuilder.__doc__
+
+    def build(self, **kw):
+        """A :class:`ParticleScene` (its keyword arguments: contacts, render, interpolate, max_dt)."""
+        return ParticleScene(copy.deepcopy(self.data), **kw)
