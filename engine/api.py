@@ -236,7 +236,7 @@ class ParticleScene:
         if given, without moving the emitter (a spark shower where a bullet hits)."""
         s = self._live("burst")
         e = self._emitter("burst", name)
-        ring = s.particles.layout.sizes[e]
+        ring = s.emitter_capacity(e)
         n = integer("burst: count", count, 0, ring)
         p = None if position is None else vector("burst: position", position)
         if n:
@@ -263,7 +263,7 @@ class ParticleScene:
         return bodies[names.index(checks.name(f"{where}: body", name, names, "body"))]
 
     def _node(self, where: str, body, node) -> int:
-        return integer(f"{where}: node", node, 0, body.topology.node_count - 1)
+        return integer(f"{where}: node", node, 0, body.node_count - 1)
 
     def pin(self, body: str, node: int, target=None) -> None:
         """Hold a node of a soft body at ``target`` (default: where it is), from the next step."""
@@ -307,7 +307,7 @@ class ParticleScene:
 
     def energy(self) -> dict:
         """Per soft body: kinetic, gravitational and spring energy (J)."""
-        return {b.cfg.name or f"body{k}": b.system.energy() for k, b in enumerate(self._live("energy").bodies)}
+        return {b.cfg.name or f"body{k}": b.energy() for k, b in enumerate(self._live("energy").bodies)}
 
     def contacts(self, min_speed: float = 0.0, body: str | None = None) -> Contacts:
         """Every contact since the previous call (the queue drains), however many steps ran,
@@ -324,7 +324,7 @@ class ParticleScene:
             if not b.cfg.contacts:
                 raise RuntimeError(f"contacts: body {body!r} does not record contacts: set contacts = true "
                                    f"in its config")
-            c = b.system.contact_log.drain(names)
+            c = b.contacts(names)
         else:
             c = s.particles.contacts(names) if s.particles is not None else Contacts.empty(names)
         return c.where(c.speed >= v) if v > 0 else c

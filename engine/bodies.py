@@ -103,6 +103,10 @@ class SoftBody(SystemBase):
     def energy(self) -> dict:
         return self.system.energy()
 
+    @property
+    def node_count(self) -> int:
+        return self.topology.node_count
+
     def contacts(self, names=()):
         return self.system.contact_log.drain(names)
 

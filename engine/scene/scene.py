@@ -166,7 +166,7 @@ class Scene:
             self.particles.emitters.carry_local(0.0, 0.0, compile_only=True)
         for body in self.bodies:
             body.positions()
-            body.system.contact_log.drain()
+            body.contacts()
         for w, h in sizes:
             self.render(w, h)
         self.reset()
@@ -204,6 +204,14 @@ class Scene:
     def systems(self) -> list:
         """The scene's systems in coupling order (engine.system)."""
         return list(self.coupler.systems)
+
+    def emitter_capacity(self, e: int) -> int:
+        """Slots of emitter ``e``'s ring in the pool (the most one burst can emit)."""
+        return self.particles.ring_size(e) if self.particles is not None else 0
+
+    def energy(self) -> dict:
+        """{system name: its named energy terms (J)} for every system that reports any."""
+        return {s.name: e for s in self.coupler.systems if (e := s.energy())}
 
     def system_stats(self) -> dict:
         """{system name: its own step counts}: the particle pool's (``stats``) and each soft
