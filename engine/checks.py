@@ -45,7 +45,7 @@ LIMITS = {
                               f"and at most {MAX_RENDER_BYTES >> 30} GiB of render memory "
                               f"({RENDER_BYTES_PER_PIXEL} B per pixel)",
     "camera (render)": "an engine.api.Camera: finite position and look_at apart, fov in (1, 170) degrees",
-    "out (render)": "a C-contiguous uint8 NumPy array of shape (height, width, 4)",
+    "out (render)": "a writeable, C-contiguous uint8 NumPy array of shape (height, width, 4)",
     "alpha (render)": "None or finite in [0, 1]; needs a scene built with interpolate=True",
     "contacts (build)": f"bool or a whole number 0 to {MAX_CONTACTS:,} (records kept between drains)",
     "emitter, collider, body (add_*)": "a dict of config keys, checked as a config is",
@@ -153,11 +153,22 @@ def camera(where: str, cam, cls):
 
 
 def image_array(where: str, out, width: int, height: int) -> np.ndarray:
+    """The caller's image array: checked property by property (dtype, shape, C-contiguous,
+    writeable: a read-only array, one over ``bytes`` or a read-only ``np.memmap``, is refused,
+    never written), each failure named in the message."""
     if not isinstance(out, np.ndarray):
         raise TypeError(f"{where}: {show(out)} is not a NumPy array")
-    if out.dtype != np.uint8 or out.shape != (height, width, 4) or not out.flags.c_contiguous:
-        raise ValueError(f"{where}: a {out.dtype} array of shape {out.shape} is not allowed: must be a "
-                         f"C-contiguous uint8 array of shape ({height}, {width}, 4)")
+    want = f"must be a writeable C-contiguous uint8 array of shape ({height}, {width}, 4)"
+    if out.dtype != np.uint8:
+        raise ValueError(f"{where}: dtype {out.dtype} is not allowed: {want}")
+    if out.shape != (height, width, 4):
+        raise ValueError(f"{where}: shape {out.shape} is not allowed: {want}")
+    if not out.flags.c_contiguous:
+        raise ValueError(f"{where}: the array is not C-contiguous (strides {out.strides}): {want}; "
+                         f"pass np.ascontiguousarray(...) and copy it back")
+    if not out.flags.writeable:
+        raise ValueError(f"{where}: the array is read-only (writeable=False: a view of bytes, a read-only "
+                         f"memmap or flags.writeable cleared): {want}")
     return out
 
 
