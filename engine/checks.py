@@ -121,7 +121,7 @@ def name(where: str, v, names, kind: str) -> str:
     """One of ``names`` (KeyError naming the value and the names of that ``kind`` there are)."""
     if not isinstance(v, str):
         raise TypeError(f"{where}: {show(v)} is not a name (str)")
-    if v not in names:
+    if not v or v not in names:  # "" is no name: unnamed items cannot be reached by it
         known = ", ".join(repr(n) for n in names if n) or "none"
         raise KeyError(f"{where}: no {kind} named {show(v)} (names: {known})")
     return v

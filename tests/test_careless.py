@@ -123,3 +123,29 @@ def test_births_moved_to_free_slots_are_the_same_bytes_for_any_thread_count(tmp_
     assert all(r.returncode == 0 for r in runs), [r.stderr[-1500:] for r in runs]
     out = [r.stdout.split() for r in runs]
     assert out[0] == out[1] == out[2], out
+
+
+# -- names ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("bad", [" ", "\t", "a\nb", "nul\x00", " lead", "trail ", "\x7f"])
+def test_emitter_names_must_be_printable_and_not_blank(bad):
+    from engine.config import ConfigError, load_config
+
+    with pytest.raises(ConfigError) as e:
+        load_config({"emitters": [{"name": "ok", "rate": 1.0}, {"name": bad, "rate": 1.0}]})
+    assert len(e.value.problems) == 1, e.value.problems
+    line = e.value.problems[0]
+    assert line.startswith("emitters[1].name: ") and "\n" not in line, line
+    for kind in ("colliders", "bodies"):
+        item = {"name": bad, "type": "plane"} if kind == "colliders" else {"name": bad, "type": "chain"}
+        with pytest.raises(ConfigError, match=rf"{kind}\[0\]\.name"):
+            load_config({"emitters": [{"rate": 1.0}], kind: [item]})
+
+
+def test_an_empty_name_reaches_nothing():
+    from engine.config import ConfigError, load_config
+
+    load_config({"emitters": [{"rate": 1.0}, {"name": "", "rate": 1.0}]})  # unnamed: allowed
+    with pytest.raises(ConfigError, match=r"emitters\[0\]\.sub_emitters\[0\]\.emitter: '' is not allowed"):
+        load_config({"emitters": [{"name": "a", "rate": 1.0, "sub_emitters": [{"emitter": ""}]}, {"rate": 1.0}]})
+    with pytest.raises(KeyError, match="burst: name: no emitter named ''"):
+        checks.name("burst: name", "", ["", "sparks"], "emitter")

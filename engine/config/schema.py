@@ -13,7 +13,7 @@ import math
 import re
 from typing import Annotated, List, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..ode.methods import INTEGRATORS
@@ -38,8 +38,21 @@ ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_le
 
 MAX_STOPS = 8
 MAX_FRAMES = 1_000_000  # frames in one run, whether given as `frames` or as duration × fps
+
+
+def _check_item_name(name: str) -> str:
+    """A name the API finds an emitter, collider or body by and the run summary prints: "" (or
+    no key) leaves it unnamed; otherwise printable, not blank, no control characters (newline,
+    NUL) and no leading or trailing spaces."""
+    if name and (re.search(r"[\x00-\x1f\x7f]", name) or not name.strip() or name != name.strip()):
+        raise ValueError(f"{name!r} is not allowed: a name must be printable text without control characters "
+                         f"(newline, NUL, tab), not blank and without leading or trailing spaces (\"\" or no "
+                         f"name key: unnamed)")
+    return name
+
+
 # Names of emitters, colliders and bodies: the API finds things by them, the run summary prints them
-Name = Annotated[str, Field(max_length=64)]
+Name = Annotated[str, Field(max_length=64), AfterValidator(_check_item_name)]
 
 
 def _check_curve(stops):
@@ -397,7 +410,9 @@ class Scene(Strict):
         for i, em in enumerate(self.emitters):
             for j, sub in enumerate(em.sub_emitters):
                 key = ("emitters", i, "sub_emitters", j, "emitter")
-                if sub.emitter not in names:
+                if not sub.emitter:
+                    problems.append((key, "'' is not allowed: name the emitter to feed (a named one)"))
+                elif sub.emitter not in names:
                     known = ", ".join(repr(n) for n in names if n) or "none"
                     problems.append((key, f"{sub.emitter!r} names no emitter (names: {known})"))
                 elif sub.emitter == em.name:
