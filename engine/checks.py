@@ -31,7 +31,7 @@ LIMITS = {
     "dt (step)": f"finite, > 0 and <= max_dt (default {MAX_DT:g} s; at most {MAX_STEPS_PER_CALL:,} "
                  "integrator steps of solver.h)",
     "max_dt": "finite, > 0 and <= 60 s",
-    "frame_time (FixedTimestep.advance)": "finite, >= 0 (a stall is cut to max_steps steps)",
+    "frame_time (FixedTimestep.advance)": "finite, >= 0 (a stall is cut to max_steps steps; a step that raised drops the time left)",
     "name (emitter, collider, body)": "a str naming one in the scene (KeyError lists the names)",
     "position, target (m)": f"3 finite numbers within ±{COORD:g}: list, tuple or NumPy array",
     "wind (m/s), gravity (m/s²)": f"3 finite numbers within ±{COORD:g}",
@@ -54,7 +54,7 @@ LIMITS = {
     "spare_emitters, spare_slots (build)": "whole numbers, 0 to 64 and 0 to 50,000,000",
     "copies (prepare)": "a whole number, 1 to 64",
     "sizes (warm_up, prepare)": "(width, height) pairs, as render's",
-    "dt, max_steps (FixedTimestep)": "dt finite in (0, 1] s; max_steps a whole number, 1 to 100,000",
+    "dt, max_steps (FixedTimestep)": "dt finite in [1e-06, 1] s; max_steps a whole number, 1 to 100,000",
 }
 
 
@@ -77,7 +77,10 @@ def number(where: str, v, lo: float = -math.inf, hi: float = math.inf, *, lo_ope
     """A finite real in [lo, hi] ((lo, hi] with ``lo_open``) as a float."""
     if not _is_real(v):
         raise TypeError(f"{where}: {show(v)} is not a number")
-    x = float(v)
+    try:
+        x = float(v)
+    except OverflowError:  # an int past the float range (10**400)
+        x = math.inf if v > 0 else -math.inf
     ok = math.isfinite(x) and (x > lo if lo_open else x >= lo) and x <= hi
     if not ok:
         rng = [f"> {lo:g}" if lo_open else f">= {lo:g}"] if math.isfinite(lo) else []

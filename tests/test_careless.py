@@ -149,3 +149,58 @@ def test_an_empty_name_reaches_nothing():
         load_config({"emitters": [{"name": "a", "rate": 1.0, "sub_emitters": [{"emitter": ""}]}, {"rate": 1.0}]})
     with pytest.raises(KeyError, match="burst: name: no emitter named ''"):
         checks.name("burst: name", "", ["", "sparks"], "emitter")
+
+
+# -- FixedTimestep and step() ---------------------------------------------------------------------------
+class _Flaky:
+    """A scene whose third step raises."""
+
+    def __init__(self, fail_at=3):
+        self.steps, self.fail_at = 0, fail_at
+
+    def step(self, dt):
+        self.steps += 1
+        if self.steps == self.fail_at:
+            raise RuntimeError("boom")
+
+
+def test_fixed_timestep_after_a_raise_runs_no_burst_of_steps():
+    from engine.api import FixedTimestep
+
+    clock, scene = FixedTimestep(0.01), _Flaky()
+    with pytest.raises(RuntimeError, match="boom"):
+        clock.advance(scene, 0.16)  # 16 steps due; the third raises
+    assert scene.steps == 3
+    assert clock.advance(scene, 0.01) == 1  # one frame's worth, not the 13 left over
+    assert scene.steps == 4 and 0.0 <= clock.alpha < 1.0
+
+
+@pytest.mark.parametrize("dt", [1e-9, 1e-12, 5e-324, 9.99e-7])
+def test_fixed_timestep_refuses_a_tiny_dt(dt):
+    from engine.api import FixedTimestep
+
+    with pytest.raises(ValueError) as e:
+        FixedTimestep(dt)
+    text = _one_line(e)
+    assert text.startswith("FixedTimestep: dt: ") and repr(dt) in text and "1e-06" in text, text
+    assert FixedTimestep(1e-6).dt == 1e-6
+
+
+def test_huge_numbers_are_refused_in_one_line_naming_the_argument():
+    with pytest.raises(ValueError) as e:
+        checks.number("step: dt", 10**400, 0.0, lo_open=True)
+    text = _one_line(e)
+    assert text.startswith("step: dt: ") and "not allowed" in text, text
+    with pytest.raises(ValueError, match="^step: dt: "):
+        checks.number("step: dt", -10**400, 0.0, lo_open=True)
+
+
+def test_step_of_a_huge_int_names_dt():
+    from engine.api import SceneBuilder
+
+    s = SceneBuilder(fps=60).emitter(name="e", rate=10.0).build(render=False)
+    with pytest.raises(ValueError) as e:
+        s.step(10**400)
+    assert _one_line(e).startswith("step: dt: ")
+    assert s.time == 0.0
+    s.close()
