@@ -45,7 +45,8 @@ LIMITS = {
                               f"and at most {MAX_RENDER_BYTES >> 30} GiB of render memory "
                               f"({RENDER_BYTES_PER_PIXEL} B per pixel)",
     "camera (render)": "an engine.api.Camera: finite position and look_at apart, fov in (1, 170) degrees",
-    "out (render)": "a writeable, C-contiguous uint8 NumPy array of shape (height, width, 4)",
+    "out (render)": "a writeable, C-contiguous uint8 NumPy array of shape (height, width, 4) (a read-only array, "
+                    "one over `bytes` or a read-only `np.memmap` is refused)",
     "alpha (render)": "None or finite in [0, 1]; needs a scene built with interpolate=True",
     "contacts (build)": f"bool or a whole number 0 to {MAX_CONTACTS:,} (records kept between drains)",
     "emitter, collider, body (add_*)": "a dict of config keys, checked as a config is",
