@@ -26,7 +26,7 @@ import weakref
 
 import numpy as np
 
-from . import checks, reuse
+from . import checks, reuse, runtime
 from .budget import fit, hold, particle_budget, release, set_particle_budget
 from .builder import SceneBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
@@ -72,6 +72,7 @@ class ParticleScene:
                  interpolate: bool = False, max_dt: float = MAX_DT, spare_emitters: int = SPARE_EMITTERS,
                  spare_slots: int = SPARE_SLOTS):
         where = type(self).__name__
+        runtime.check_thread(where)
         self._spare = (integer(f"{where}: spare_emitters", spare_emitters, 0, 64),
                        integer(f"{where}: spare_slots", spare_slots, 0, MAX_POOL))
         self._contacts = (65536 if contacts is True else
@@ -115,6 +116,7 @@ class ParticleScene:
         if self._finalizer is not None:
             self._finalizer.detach()  # the scene it replaces was carried over: not reusable
         self.scene, self.cfg, self._data, self._key = scene, cfg, data, key
+        self._program = reuse.program()
         self._token = object()
         hold(self._token, scene.capacity)
         self._finalizer = weakref.finalize(self, _discard, key, scene, self._token, reuse.program())
@@ -168,8 +170,12 @@ class ParticleScene:
         self.close()
 
     def _live(self, where: str) -> Scene:
+        runtime.check_thread(where)
         if self.scene is None:
             raise RuntimeError(f"{where}: this scene was closed")
+        if self._program != reuse.program():
+            raise RuntimeError(f"{where}: this scene was built before engine.runtime.reset(), which freed its "
+                               f"fields and kernels: build it again")
         return self.scene
 
     # -- time -------------------------------------------------------------------------------------

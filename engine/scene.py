@@ -61,7 +61,7 @@ class Scene:
         ``previous``: the scene this one replaces (a rebuild
         between frames): its time, statistics, inputs and live particles carry over by name, and
         its soft bodies whose config did not change are kept without recompiling them."""
-        runtime.ensure_init()
+        runtime.ensure_init("Scene")
         self.cfg = self._built = cfg
         self.t = 0.0
         self.frame = 0
