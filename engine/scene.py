@@ -17,6 +17,7 @@ import numpy as np
 from . import runtime
 from .colliders import ColliderSpec, Colliders
 from .control import Control
+from .paths import Path
 from .ode.driver import DriverStats, SimulationDiverged
 from .particles.system import ParticleSystem
 from .render.camera import Camera
@@ -39,7 +40,7 @@ def collider_specs(cfg_colliders):
     out = []
     for c in cfg_colliders:
         common = dict(restitution=c.restitution, friction=c.friction, kill=c.kill, name=c.name,
-                      path=[(k.time, k.position) for k in c.path], visible=c.visible)
+                      path=Path((k.time, k.position) for k in c.path), visible=c.visible)
         if c.type == "plane":
             out.append(ColliderSpec("plane", point=c.point, normal=c.normal, **common))
         else:

@@ -206,6 +206,58 @@ def test_step_of_a_huge_int_names_dt():
     s.close()
 
 
+# -- long keyframe paths -----------------------------------------------------------------------------
+def _path(n, bad_at=None):
+    keys = [{"time": i * 0.001, "position": [0.0, 1.0, i * 1e-6]} for i in range(n)]
+    if bad_at is not None:
+        keys[bad_at]["time"] = 0.0
+    return keys
+
+
+def test_an_out_of_order_keyframe_is_one_short_line_in_validate_and_from_dict():
+    from engine.api import ParticleScene
+    from engine.config import ConfigError, load_config
+
+    data = {"emitters": [{"rate": 1.0, "path": _path(50_000, bad_at=31_337)}],
+            "colliders": [{"type": "sphere", "path": _path(20_000, bad_at=7)}],
+            "bodies": [{"type": "chain", "pins": [0], "pin_path": _path(10, bad_at=9)}]}
+    with pytest.raises(ConfigError) as e:
+        load_config(data)
+    problems = e.value.problems
+    assert len(problems) == 3, problems
+    assert all(len(p) < 200 and "\n" not in p for p in problems), problems
+    by_key = {p.split(": ", 1)[0]: p for p in problems}
+    assert by_key["emitters[0].path"].startswith(
+        "emitters[0].path: keyframe times must increase: keyframe 31337 has time 0,"), problems
+    assert "keyframe 7 " in by_key["colliders[0].path"], problems
+    assert "keyframe 9 " in by_key["bodies[0].pin_path"], problems
+    with pytest.raises(ValueError) as e:
+        ParticleScene.from_dict({"emitters": data["emitters"]}, render=False)
+    assert len(str(e.value)) < 300 and "keyframe 31337" in str(e.value), str(e.value)[:500]
+    assert e.value.__cause__ is None and e.value.__suppress_context__
+
+
+def test_a_long_path_is_read_once_not_every_step():
+    import time
+
+    from engine.config import load_config
+    from engine.control import Control
+    from engine.paths import Path, sample_path
+
+    cfg = load_config({"emitters": [{"rate": 1.0, "path": _path(100_000)}]})
+    ems, _ = Control.inputs_for(cfg, [])
+    assert isinstance(ems[0].path, Path) and len(ems[0].path.times) == 100_000
+    t0 = time.perf_counter()
+    for k in range(500):
+        p = ems[0].position_at(k * 0.17)
+    assert time.perf_counter() - t0 < 0.5  # ~30 ms a call when the keyframes were re-read
+    assert p.tolist() == pytest.approx([0.0, 1.0, 499 * 0.17 * 1e-3], abs=1e-9)
+    short = [(0.0, (0.0, 0.0, 0.0)), (1.0, (2.0, 0.0, 0.0))]
+    assert sample_path(short, 0.25, (9, 9, 9)).tolist() == [0.5, 0.0, 0.0]
+    assert sample_path(Path(short), 0.25, (9, 9, 9)).tolist() == [0.5, 0.0, 0.0]
+    assert sample_path([], 0.25, (9, 9, 9)).tolist() == [9, 9, 9]
+
+
 # -- threads --------------------------------------------------------------------------------------------
 def _in_thread(fn):
     import threading

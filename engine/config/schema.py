@@ -67,9 +67,13 @@ def _check_curve(stops):
 
 
 def _check_path(path):
-    ts = [k.time for k in path]
-    if any(b <= a for a, b in zip(ts, ts[1:])):
-        return f"keyframe times must increase, got {ts}"
+    """Keyframe times must increase: the message names the first keyframe that does not (a path
+    may hold a million keyframes; the message stays one short line)."""
+    for i in range(1, len(path or ())):
+        a, b = path[i - 1].time, path[i].time
+        if b <= a:
+            return (f"keyframe times must increase: keyframe {i} has time {b:g}, not after keyframe {i - 1}'s "
+                    f"{a:g} ({len(path):,} keyframes)")
     return None
 
 
