@@ -51,6 +51,18 @@ def _load(where: str, data: dict):
         raise ValueError(f"{where}: {'; '.join(e.problems)}") from None
 
 
+def _shallow(where: str, data) -> None:
+    """Refuse data nested deeper than a config can be (before deepcopy or the checks recurse
+    into it: a 100,000-deep dict is one line, not a RecursionError)."""
+    from .config.load import MAX_DEPTH, check_depth
+
+    try:
+        check_depth(data)
+    except ConfigError:
+        raise ValueError(f"{where}: dicts and lists nested more than {MAX_DEPTH} levels deep are not allowed "
+                         f"(a config needs 5)") from None
+
+
 def _discard(key, scene, token, program) -> None:
     """A ParticleScene went away: its slots return to the budget, its scene to the pool."""
     release(token)
@@ -81,6 +93,7 @@ class ParticleScene:
         self._interpolate = boolean(f"{where}: interpolate", interpolate)
         self.max_dt = number(f"{where}: max_dt", max_dt, 0.0, 60.0, lo_open=True)
         if isinstance(config, dict):
+            _shallow(f"{where}: config", config)
             data = checks.plain(copy.deepcopy(config))
         elif hasattr(config, "model_dump"):
             data = config.model_dump(exclude_none=True)
@@ -370,6 +383,7 @@ class ParticleScene:
     def _add(self, where: str, key: str, item) -> None:
         if not isinstance(item, dict):
             raise TypeError(f"{where}: {checks.show(item)} is not a dict of config keys")
+        _shallow(f"{where}: {key[:-1] if key != 'bodies' else 'body'}", item)
         data = copy.deepcopy(self._data)
         data.setdefault(key, []).append(checks.plain(copy.deepcopy(item)))
         self._rebuild(where, data)
@@ -387,6 +401,7 @@ class ParticleScene:
         s = self._live("add_emitter")
         if not isinstance(emitter, dict):
             raise TypeError(f"add_emitter: {checks.show(emitter)} is not a dict of config keys")
+        _shallow("add_emitter: emitter", emitter)
         data = copy.deepcopy(self._data)
         data.setdefault("emitters", []).append(checks.plain(copy.deepcopy(emitter)))
         cfg = _load("add_emitter", data)

@@ -258,6 +258,32 @@ def test_a_long_path_is_read_once_not_every_step():
     assert sample_path([], 0.25, (9, 9, 9)).tolist() == [9, 9, 9]
 
 
+# -- deep data ------------------------------------------------------------------------------------
+def _deep(n):
+    d = x = {}
+    for _ in range(n):
+        x["a"] = {}
+        x = x["a"]
+    return d
+
+
+def test_a_100k_deep_dict_is_one_line_not_a_recursion_error():
+    from engine.api import ParticleScene
+
+    deep = _deep(100_000)
+    with pytest.raises(ValueError) as e:
+        ParticleScene.from_dict(deep, render=False)
+    assert _one_line(e).startswith("ParticleScene: config: ") and "32 levels" in str(e.value)
+    with pytest.raises(ValueError, match="^ParticleScene: config: .*32 levels"):
+        ParticleScene.from_dict({"emitters": [{"rate": 1.0, "path": [deep]}]}, render=False)
+    nested_list = x = []
+    for _ in range(100_000):
+        x.append([])
+        x = x[0]
+    with pytest.raises(ValueError, match="^ParticleScene: config: .*32 levels"):
+        ParticleScene.from_dict({"emitters": nested_list}, render=False)
+
+
 # -- threads --------------------------------------------------------------------------------------------
 def _in_thread(fn):
     import threading
