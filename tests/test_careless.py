@@ -284,6 +284,34 @@ def test_a_100k_deep_dict_is_one_line_not_a_recursion_error():
         ParticleScene.from_dict({"emitters": nested_list}, render=False)
 
 
+# -- interpolate=True ----------------------------------------------------------------------------
+@pytest.mark.slow  # (two scene builds: ~10 s cold)
+def test_interpolate_changes_no_byte_where_positions_are_equal():
+    from engine.api import SceneBuilder
+
+    def make(interp):
+        return (SceneBuilder(fps=60, seed=3).render(width=96, height=64)
+                .forces(gravity=(0.0, -9.81, 0.0))
+                .emitter(name="e", effect="sparks", rate=300.0, position=[0.0, 1.0, 0.0])
+                .emitter(name="s", effect="smoke", rate=60.0, position=[0.3, 0.5, 0.0])
+                .collider(type="plane", name="ground", restitution=0.4)
+                .build(interpolate=interp))
+
+    a, b = make(False), make(True)
+    for _ in range(30):
+        a.step(1 / 60)
+        b.step(1 / 60)
+    for kw in ({}, {"transparent": True}, {"bgra": True}):
+        want = a.render(**kw)
+        assert np.array_equal(b.render(**kw), want), kw  # drawn where they are: no alpha
+        assert np.array_equal(b.render(alpha=1.0, **kw), want), kw
+    b.scene.save_positions()  # the last step's positions = the current ones: every alpha draws them
+    for alpha in (0.0, 0.37, 0.5, 1.0):
+        assert np.array_equal(b.render(alpha=alpha), a.render()), alpha
+    a.close()
+    b.close()
+
+
 # -- threads --------------------------------------------------------------------------------------------
 def _in_thread(fn):
     import threading
