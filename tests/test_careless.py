@@ -312,6 +312,91 @@ def test_interpolate_changes_no_byte_where_positions_are_equal():
     b.close()
 
 
+# -- particles run: the output folder and --frames ----------------------------------------------------
+SPARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "configs", "sparks.toml")
+
+
+def _call(*argv):
+    import sys
+
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from runhelp import call
+
+    return call(*argv)
+
+
+def test_a_second_run_into_a_locked_folder_is_refused_in_one_line(tmp_path):
+    from engine.render.output import LOCK, lock_dir
+
+    out = tmp_path / "out"
+    held = lock_dir(str(out))  # a first run, still writing
+    try:
+        code, stdout, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", out, "--quiet")
+        assert code == 2, stderr
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: --out: {out} is being written by another "
+                                                       f"particles run (pid {os.getpid()})"), stderr
+        assert os.listdir(out) == [LOCK]  # the second run wrote nothing
+        code, _, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", out, "--resume",
+                                "--quiet")
+        assert code == 2 and "another particles run" in stderr, stderr
+    finally:
+        held.release()
+    assert os.listdir(out) == []  # the lock file goes with the run that held it
+    again = lock_dir(str(out))  # and the folder can be locked again
+    again.release()
+
+
+def test_resume_refuses_a_mixed_folder(tmp_path):
+    from engine.config import load_config
+    from engine.render.output import OutputRefused, encode_png, frame_path
+    from engine.render.resume import prepare_resume, run_record, write_record
+
+    cfg = load_config(SPARKS, {"render.width": 64, "render.height": 36})
+    out = str(tmp_path)
+    record = run_record(cfg, "png", "cpu")
+    write_record(out, record)
+    for k, (w, h) in enumerate([(64, 36), (64, 36), (80, 40), (64, 36)]):  # another run's frame 2
+        with open(frame_path(out, k), "wb") as fh:
+            fh.write(encode_png(np.zeros((h, w, 3), np.uint8)))
+    with pytest.raises(OutputRefused) as e:
+        prepare_resume(out, record)
+    text = _one_line(e)
+    assert text.startswith(f"--resume: {out} is mixed: frame_00002.png is 80x40, this run renders 64x36"), text
+    assert len(os.listdir(out)) == 5  # nothing removed
+    os.remove(frame_path(out, 2))
+    assert prepare_resume(out, record) == 2  # a gap: whole frames 0..1 kept, the one after it dropped
+
+
+def test_out_at_a_symlink_loop_says_so(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    os.symlink(b, a)
+    os.symlink(a, b)
+    for out in (a, a / "sub"):
+        code, _, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", out, "--quiet")
+        assert code == 4, stderr
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and f"{a} is a symbolic link loop" in lines[0], stderr
+        assert "File exists" not in stderr
+    dangling = tmp_path / "gone"
+    os.symlink(tmp_path / "nowhere" / "x", dangling)
+    code, _, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", dangling, "--quiet")
+    assert code == 4 and "which does not exist" in stderr, stderr
+
+
+def test_run_frames_refuses_a_duration_that_validate_refuses(tmp_path):
+    for duration, why in (("7200", "less than or equal to 3600"), ("0", "greater than 0"), ('"x"', "number")):
+        cfg = tmp_path / "d.toml"
+        cfg.write_text(f"fps = 30\nduration = {duration}\n[[emitters]]\nrate = 10.0\n")
+        code, stdout, _ = _call("validate", cfg)
+        assert code == 2 and f"duration: {duration.strip(chr(34))!s}" in stdout.replace("'", ""), stdout
+        code, _, stderr = _call("run", cfg, "--frames", "1", "--size", "64x36", "--out", tmp_path / "o", "--quiet")
+        assert code == 2, stderr
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and f"{cfg}: duration: " in lines[0] and why in lines[0], stderr
+        assert not (tmp_path / "o").exists()
+
+
 # -- threads --------------------------------------------------------------------------------------------
 def _in_thread(fn):
     import threading
