@@ -347,6 +347,33 @@ def test_a_second_run_into_a_locked_folder_is_refused_in_one_line(tmp_path):
     again.release()
 
 
+@pytest.mark.slow
+def test_two_runs_into_one_folder_the_second_is_refused(tmp_path):
+    import subprocess
+    import sys
+    import time
+
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from runhelp import command
+
+    out = tmp_path / "out"
+    cmd, kw = command("run", SPARKS, "--frames", "400", "--size", "64x36", "--out", out, "--quiet")
+    first = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+    try:
+        deadline = time.monotonic() + 240
+        while not (out / ".particles-run.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert (out / ".particles-run.json").exists()
+        code, _, stderr = _call("run", SPARKS, "--frames", "3", "--size", "80x40", "--seed", "9", "--out", out,
+                                "--overwrite", "--quiet")
+        assert code == 2 and f"pid {first.pid}" in stderr, stderr
+    finally:
+        first.terminate()
+        first.wait(60)
+    assert first.returncode in (0, 143), first.stderr.read()
+    assert not (out / ".particles-run.lock").exists()  # the first run's lock went with it
+
+
 def test_resume_refuses_a_mixed_folder(tmp_path):
     from engine.config import load_config
     from engine.render.output import OutputRefused, encode_png, frame_path
