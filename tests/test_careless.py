@@ -514,3 +514,43 @@ def test_zz_a_scene_used_after_runtime_reset_says_so_in_one_line():
         s.close()  # closing a dead scene is harmless
     finally:
         runtime.init("cpu")
+
+
+# -- particles wedge teardown -------------------------------------------------------------------------
+def test_the_farm_shuts_down_with_dask_teardown_logs_silenced():
+    import logging
+
+    pytest.importorskip("distributed")
+    from engine.tools.wedge import farm
+
+    seen = {}
+
+    class FakeClient:
+        def run(self, fn, nanny=False):
+            seen.setdefault("run", []).append((fn, nanny))
+
+        def unsubscribe_topic(self, topic):
+            pass
+
+        def close(self):
+            seen["client"] = logging.getLogger("distributed").getEffectiveLevel()
+
+    class FakeCluster:
+        def close(self):
+            seen["cluster"] = {n: logging.getLogger(n).getEffectiveLevel() for n in ("distributed", "tornado",
+                                                                                     "asyncio")}
+
+    f = object.__new__(farm.Farm)
+    f.client, f.cluster = FakeClient(), FakeCluster()
+    levels = {n: logging.getLogger(n).level for n in ("distributed", "tornado", "asyncio")}
+    try:
+        f.close()
+        assert seen["client"] > logging.CRITICAL
+        assert all(v > logging.CRITICAL for v in seen["cluster"].values()), seen
+        assert [nanny for _, nanny in seen["run"]] == [False, True]  # workers and nannies quietened first
+        fn = seen["run"][0][0]
+        fn()
+        assert logging.getLogger("distributed").getEffectiveLevel() > logging.CRITICAL
+    finally:
+        for n, level in levels.items():
+            logging.getLogger(n).setLevel(level)
