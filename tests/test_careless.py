@@ -554,3 +554,66 @@ def test_the_farm_shuts_down_with_dask_teardown_logs_silenced():
     finally:
         for n, level in levels.items():
             logging.getLogger(n).setLevel(level)
+
+
+def test_the_progress_display_says_the_first_frame_compiles(tmp_path, monkeypatch):
+    import contextlib
+
+    from engine.tools import commands, progress
+
+    notes = []
+
+    class Bar:
+        def advance(self, n=1, note=""):
+            notes.append(("advance", note))
+
+        def update(self, completed, note=""):
+            notes.append(("update", note))
+
+    @contextlib.contextmanager
+    def fake(total, unit="items", label="", quiet=False, stream=None):
+        yield Bar()
+
+    monkeypatch.setattr(progress, "progress", fake)
+    code, _, stderr = _call("run", SPARKS, "--frames", "2", "--size", "64x36", "--out", tmp_path / "o")
+    assert code == 0, stderr
+    assert notes[0] == ("update", commands.COMPILING) and "compiling kernels" in notes[0][1]
+    assert notes[1][0] == "advance" and "compiling" not in notes[1][1]  # gone after the first frame
+
+
+# -- particles list outside the checkout ----------------------------------------------------------------
+def test_list_works_outside_the_checkout(tmp_path, monkeypatch):
+    import shutil
+
+    import engine.tools as tools
+
+    monkeypatch.chdir(tmp_path)  # no configs/ here
+    code, stdout, stderr = _call("list")
+    assert code == 0, stderr
+    assert stdout.splitlines()[0].startswith(f"configs in {tools.CONFIGS}/:") and "sparks.toml" in stdout
+    # a wheel install: the configs under the prefix (pyproject's data-files)
+    installed = tmp_path / "share" / "particles-engine" / "configs"
+    installed.mkdir(parents=True)
+    shutil.copy(SPARKS, installed / "sparks.toml")
+    monkeypatch.setattr(tools, "CONFIGS", str(tmp_path / "no-checkout"))
+    monkeypatch.setattr(tools, "INSTALLED_CONFIGS", str(installed))
+    code, stdout, stderr = _call("list")
+    assert code == 0 and f"configs in {installed}/:" in stdout and "sparks.toml" in stdout, stdout + stderr
+    monkeypatch.setattr(tools, "INSTALLED_CONFIGS", str(tmp_path / "none"))
+    code, stdout, stderr = _call("list")
+    assert code == 2 and stderr.count("\n") == 1 and stderr.startswith("error: --dir: no configs/ folder in "), stderr
+
+
+def test_the_wheel_ships_the_configs():
+    try:
+        import tomllib
+    except ImportError:  # Python < 3.11
+        import tomli as tomllib
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    with open(os.path.join(root, "pyproject.toml"), "rb") as fh:
+        py = tomllib.load(fh)
+    assert py["tool"]["setuptools"]["data-files"]["share/particles-engine/configs"] == ["configs/*.toml"]
+    from engine.tools import INSTALLED_CONFIGS
+
+    assert INSTALLED_CONFIGS.endswith(os.path.join("share", "particles-engine", "configs"))

@@ -11,6 +11,7 @@ from .errors import OutputFailure, SimulationError, Stopped, UserError
 from ..config import ConfigError, load_config, read_toml
 
 OUTPUT_ROOT = "renders"
+COMPILING = "compiling kernels… (a cold first run takes ~10 s; later runs load them from the cache)"
 
 
 def _overrides(args) -> dict:
@@ -226,6 +227,8 @@ def _run(cfg, args, out_dir, workers, total, first) -> int:
     writer = FrameWriter(out_dir, args.format, cfg.fps, cfg.name, workers=workers)
     with stopping(raise_now=False) as stop:
         with progress(total, unit="frames", label=cfg.name, quiet=getattr(args, "quiet", False)) as bar:
+            # the first frame compiles every kernel of the scene (~10 s cold; ~1 s from the cache)
+            bar.update(0, note=COMPILING)
             failure, out_failure = render_frames(scene, writer, first, total, stop, bar)
     wall = time.perf_counter() - t_start
     st = scene.stats
@@ -275,10 +278,18 @@ def cmd_validate(args) -> int:
 def cmd_list(args) -> int:
     from effects import PRESETS
 
+    from . import shipped_configs
+
     root = args.dir
+    if root is None:  # ./configs (a checkout), else the configs shipped with the engine
+        root = "configs" if os.path.isdir("configs") else shipped_configs()
+        if root is None:
+            raise UserError(f"--dir: no configs/ folder in {os.getcwd()} and none shipped with this "
+                            f"install; pass --dir FOLDER")
     if not os.path.isdir(root):
         raise UserError(f"--dir: {root!r} is not a folder")
-    print(f"configs in {root}/:")
+    print(f"configs in {root}/:" + ("" if root == "configs" else "  (run one: particles run "
+                                     f"{os.path.join(root, '<name>.toml')})"))
     for path in sorted(glob.glob(os.path.join(root, "*.toml"))):
         try:
             cfg = load_config(path)
