@@ -127,7 +127,8 @@ def build_parser(extra=()) -> argparse.ArgumentParser:
     sc.set_defaults(func=_cmd_schema)
 
     ls = sub.add_parser("list", help="list the configs and effect presets")
-    ls.add_argument("--dir", default="configs", type=T(flags.path))
+    ls.add_argument("--dir", default=None, type=T(flags.path),
+                    help="folder of configs (default: ./configs, else the configs shipped with the engine)")
     ls.set_defaults(func=lambda a: _commands().cmd_list(a), no_taichi=True)
 
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
