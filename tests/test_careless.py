@@ -91,17 +91,52 @@ def test_a_burst_does_not_starve_the_stream_while_the_segment_has_free_slots():
     s.close()
 
 
+
+def _children():
+    from engine.api import SceneBuilder
+
+    return (SceneBuilder(fps=60, seed=4)
+            .emitter(name="p", rate=200.0, lifetime=0.1, speed=(0.5, 1.0),
+                     sub_emitters=[{"event": "death", "emitter": "c", "count": 1}])
+            .emitter(name="c", rate=0.0, emitting=False, lifetime=1.0, lifetime_randomness=0.9,
+                     speed=(0.1, 0.2), capacity=160)
+            .build(render=False))
+
+
+def test_sub_emitter_children_take_free_slots_too():
+    """Children whose ring slot holds a long-lived child take a free slot of their segment: none
+    is dropped while the segment has room (before: 117 of 779 dropped with the segment at most
+    109 of 160 full)."""
+    s = _children()
+    ps = s.scene.particles
+    start, size = ps.layout.starts[1], ps.layout.sizes[1]
+    most = 0
+    for _ in range(240):
+        s.step(1 / 60)
+        most = max(most, int(ps.state.particle_alive.to_numpy()[start:start + size].sum()))
+    assert most < size
+    assert ps.emitters.dropped_counts().tolist() == [0, 0]
+    assert ps.emitters.emitted_counts()[1] > 700
+    s.close()
+
 SLOT_PROBE = """
 import hashlib, sys
 sys.path[:0] = [".", "tests"]
 from engine import runtime
 runtime.init("cpu", threads=int(sys.argv[1]))
-from test_careless import _stream_and_burst
+from test_careless import _children, _stream_and_burst
 s = _stream_and_burst()
 for i in range(150):
     if i in (30, 60):
         s.burst("sparks", 200)
     s.step(1 / 120)
+c = _children()
+for i in range(120):
+    c.step(1 / 60)
+h = hashlib.sha256()
+for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive", "particle_emitter"):
+    h.update(getattr(c.scene.particles.state, f).to_numpy().tobytes())
+print(h.hexdigest(), c.dropped(), *c.scene.particles.emitters.emitted_counts())
 S = s.scene.particles.state
 h = hashlib.sha256()
 for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive", "particle_emitter"):
