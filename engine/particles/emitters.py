@@ -82,6 +82,8 @@ class Emitters:
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
         if self.links:
             self.link_counts = ti.field(ti.i32, shape=CHUNKS)
+            # children of one pass whose ring slot was alive (parent slot + 1), by rank: at most a ring
+            self.link_moved = ti.field(ti.i32, shape=max(max(layout.sizes[c] for _, c, *_ in self.links), 1))
 
     def _arrays(self, cs) -> dict:
         """name → (array of shape (rows,) or (rows, 3), dtype) of every per-emitter parameter;
@@ -220,7 +222,7 @@ class Emitters:
             size = L.sizes[p]
             chunks = max(1, min(CHUNKS, size // CHUNK_MIN))
             _k.count_events(self.state, self.link_counts, L.starts[p], size, chunks, bit, min_speed)
-            _k.spawn_children(self, self.state, self.link_counts, L.starts[p], size, chunks, bit,
+            _k.spawn_children(self, self.state, self.link_counts, self.link_moved, L.starts[p], size, chunks, bit,
                               min_speed, c, L.starts[c], L.sizes[c], count)
 
     def dropped_counts(self) -> np.ndarray:

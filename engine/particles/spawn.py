@@ -166,16 +166,32 @@ def count_events(S: ti.template(), counts: ti.template(), p_start: ti.i32, p_siz
         counts[q] = n
 
 
+@ti.func
+def _child(E: ti.template(), S: ti.template(), i, c, sid, slot, bit):
+    """Child ``sid`` of emitter c from parent slot i, into ``slot``. A collision's children are
+    born where and when the impact was located: at the point on the surface, then moved along
+    their velocity for the time left in the step (the age they start with)."""
+    ti.atomic_add(E.emitter_emitted[c], 1)
+    if bit == EVENT_COLLISION:  # born at the located impact, as old as it is
+        lag = S.particle_impact_lag[i]
+        init_particle(E, S, slot, c, sid, S.particle_impact_pos[i], S.particle_vel[i])
+        S.particle_pos[slot] += lag * S.particle_vel[slot]
+        S.particle_age[slot] = lag
+    else:
+        init_particle(E, S, slot, c, sid, S.particle_pos[i], S.particle_vel[i])
+
+
 @ti.kernel
-def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), p_start: ti.i32,
-                   p_size: ti.i32, chunks: ti.i32, bit: ti.i32, min_speed: ti.f32, c: ti.i32,
+def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), moved: ti.template(),
+                   p_start: ti.i32, p_size: ti.i32, chunks: ti.i32, bit: ti.i32, min_speed: ti.f32, c: ti.i32,
                    c_start: ti.i32, c_size: ti.i32, count: ti.i32):
     """Pass 2: each slice adds up the counts before it (its parents' first rank) and walks its
     parents in slot order; the n-th child of the pass takes ring slot head + n and serial
-    serial + n. A collision's children are born where and when the impact was located: at the
-    point on the surface, then moved along their velocity for the time left in the step (the
-    age they start with). A child that finds its slot alive, or that would wrap onto a slot this pass already
-    gave out (n ≥ ring size), is counted dropped."""
+    serial + n. A child that would wrap onto a slot this pass already gave out (n ≥ ring size)
+    is counted dropped; one that finds its ring slot alive is marked in ``moved[n]`` (its parent
+    slot + 1) and, after the pass, takes the first free slot of the child segment in slot order
+    (one thread walks the marked children in n order: deterministic), or is counted dropped when
+    the segment is full."""
     h0, s0 = E.emitter_head[c], E.emitter_serial[c]
     size = (p_size + chunks - 1) // chunks
     for q in range(chunks):
@@ -187,20 +203,30 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), p_
                 for j in range(count):
                     n = rank * count + j
                     slot = c_start + (h0 + n) % c_size
-                    if n >= c_size or S.particle_alive[slot] != 0:
+                    if n >= c_size:
                         ti.atomic_add(E.dropped[c], 1)
+                    elif S.particle_alive[slot] != 0:
+                        moved[n] = i + 1  # placed below, in a free slot
+                        ti.atomic_add(E.emitter_moved[c], 1)
                     else:
-                        ti.atomic_add(E.emitter_emitted[c], 1)
-                        if bit == EVENT_COLLISION:  # born at the located impact, as old as it is
-                            lag = S.particle_impact_lag[i]
-                            init_particle(E, S, slot, c, s0 + n, S.particle_impact_pos[i], S.particle_vel[i])
-                            S.particle_pos[slot] += lag * S.particle_vel[slot]
-                            S.particle_age[slot] = lag
-                        else:
-                            init_particle(E, S, slot, c, s0 + n, S.particle_pos[i], S.particle_vel[i])
+                        moved[n] = 0
+                        _child(E, S, i, c, s0 + n, slot, bit)
                 rank += 1
     total = 0
     for q in range(chunks):
         total += counts[q]
+    for _ in range(1):  # one thread: the moved children in n order
+        if E.emitter_moved[c] > 0:
+            E.emitter_moved[c] = 0
+            cursor = 0
+            for n in range(ti.min(total * count, c_size)):
+                if moved[n] != 0:
+                    while cursor < c_size and S.particle_alive[c_start + cursor] != 0:
+                        cursor += 1
+                    if cursor < c_size:
+                        _child(E, S, moved[n] - 1, c, s0 + n, c_start + cursor, bit)
+                        cursor += 1
+                    else:
+                        E.dropped[c] += 1  # the segment is full
     E.emitter_head[c] = (h0 + total * count) % c_size
     E.emitter_serial[c] = s0 + total * count
