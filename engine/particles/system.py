@@ -57,6 +57,11 @@ class ParticleSystem(SystemBase):
                                              self.method, self.adaptive, sol.extrapolate,
                                              events=self.emitters.uses_events, contacts=contacts,
                                              impacts=sol.impacts, quadratic=self.forces.names == ["gravity"])
+        self.interact = None  # a scene without interact imports, allocates and compiles none of it
+        if any(e.interact is not None for e in cfg.emitters) and self.layout.capacity:
+            from .interact import Interactions
+
+            self.interact = Interactions(self.state, cfg.emitters, rows, colliders)
         self.order = METHODS[self.method].order
         atol = sol.atol if sol.atol is not None else sol.tolerance
         self.atol, self.rtol = atol, sol.tolerance
@@ -93,7 +98,7 @@ class ParticleSystem(SystemBase):
         held, self._held = self._held, None
         self.emitters.spawn(held[1] if held is not None and held[0] == (t0, h, j) else self.emitters.plan(t, h))
         k = 1
-        if not self._move_colliders(t, t + h) and not self.emitters.uses_events:
+        if not self._move_colliders(t, t + h) and not self.emitters.uses_events and self.interact is None:
             while j + k < min(n, j + MAX_RUN):
                 due = self.emitters.plan(t0 + (j + k) * h, h)
                 if due is not None:
@@ -105,6 +110,8 @@ class ParticleSystem(SystemBase):
                 integrate.step_fixed(self.integrator, t, h)
             else:
                 integrate.step_fixed_run(self.integrator, t0, h, j, k)
+            if self.interact is not None:  # (k == 1: interacting particles take no fused runs)
+                self.interact.step(h)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t0 + (j + k) * h)
         return k
@@ -119,6 +126,8 @@ class ParticleSystem(SystemBase):
     def commit(self, t: float, h: float) -> None:
         if self.layout.capacity:
             integrate.commit(self.integrator, t, h)
+            if self.interact is not None:
+                self.interact.step(h)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t + h)
 
@@ -148,6 +157,8 @@ class ParticleSystem(SystemBase):
             return f"its pool needs {need:,} slots, {self.layout.spare:,} spare"
         if any(e.sub_emitters for e in new):
             return "it has sub-emitters"
+        if any(e.interact is not None for e in new):
+            return "it interacts (the interactions are built with the scene)"
         if not self.forces.covers(cfg.forces, cfg.emitters):
             return "it needs a force term the scene did not compile"
         return None
