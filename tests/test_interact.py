@@ -269,3 +269,46 @@ def test_bad_interact_exits_2_with_one_line(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "interact.kind" in lines[0], r.stderr
     assert not (tmp_path / "o").exists()
+
+
+# -- soft-body self-collision --------------------------------------------------------------------
+def _crumple(self_collision):
+    """A 20 × 20 cloth (0.8 m, thickness 0.02 m) dropped edge-on onto the ground: it folds onto
+    itself. Returns (node positions, unjoined node pairs closer than 2·thickness)."""
+    from scipy.spatial import cKDTree
+
+    cfg = {"fps": 30.0, "frames": 45,
+           "bodies": [{"type": "cloth", "resolution": [20, 20], "size": [0.8, 0.8], "plane": "xy",
+                       "position": [-0.4, 0.9, 0.0], "pins": "none", "mass": 0.01, "stiffness": 2000.0,
+                       "integrator": "xpbd", "iterations": 10, "thickness": 0.02,
+                       "self_collision": self_collision}],
+           "colliders": [{"type": "plane", "restitution": 0.0, "friction": 0.6},
+                         {"type": "sphere", "center": [0.0, 0.25, 0.0], "radius": 0.08, "restitution": 0.0}]}
+    sc = _scene(cfg)
+    _run(sc, 45)
+    b = sc.bodies[0]
+    x = b.positions()
+    joined = set(zip(b.system.model.spring_a.to_numpy().tolist(), b.system.model.spring_b.to_numpy().tolist()))
+    close = [(i, j) for i, j in cKDTree(x).query_pairs(2 * 0.02 * 0.999)
+             if (i, j) not in joined and (j, i) not in joined]
+    return x, close
+
+
+@pytest.mark.slow
+def test_self_collision_keeps_cloth_layers_apart():
+    """With self_collision the folded cloth has under 40 % of the interpenetrating node pairs of
+    the same drop without it (measured: 881 against 3,485), and no node below the ground (the
+    colliders are applied after the self-contact). Not zero: layers pressed flat on the ground
+    meet edge-on, where a node–node test at the nodes alone cannot hold them apart."""
+    _, without = _crumple(False)
+    x, with_ = _crumple(True)
+    assert len(without) > 1000
+    assert len(with_) < 0.4 * len(without), (len(with_), len(without))
+    assert x[:, 1].min() >= 0.02 - 1e-4
+
+
+def test_self_collision_needs_thickness():
+    data = {"bodies": [{"type": "cloth", "thickness": 0.0, "self_collision": True}]}
+    with pytest.raises(ConfigError) as e:
+        load_config(data)
+    assert len(e.value.problems) == 1 and e.value.problems[0].startswith("bodies[0].self_collision")

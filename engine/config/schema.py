@@ -372,6 +372,7 @@ class Body(Strict):
     thickness: Annotated[float, Field(ge=0, le=1)] = 0.015  # m kept between nodes and colliders
     color: Annotated[List[Annotated[float, Field(ge=0, le=10)]], Field(min_length=3, max_length=3)] = [0.55, 0.6, 0.7]
     contacts: bool = False  # record node–collider contacts (the game API's contacts(body=name))
+    self_collision: bool = False  # nodes no spring joins keep 2 × thickness apart (the shared grid)
 
     @model_validator(mode="after")
     def _check(self):
@@ -385,6 +386,8 @@ class Body(Strict):
             ("direction", f"must not be zero, got {self.direction}"
              if math.fsum(c * c for c in self.direction) < 1e-12 else None),
             ("pin_path", _check_path(self.pin_path)),
+            ("self_collision", "needs thickness > 0 (nodes collide at 2 × thickness)"
+             if self.self_collision and self.thickness <= 0 else None),
         ])
 
 
