@@ -57,7 +57,9 @@ class ParticleSystem(SystemBase):
                                              self.method, self.adaptive, sol.extrapolate,
                                              events=self.emitters.uses_events, contacts=contacts,
                                              impacts=sol.impacts, quadratic=self.forces.names == ["gravity"])
-        self.interact = None  # a scene without interact imports, allocates and compiles none of it
+        # a scene without interact imports, allocates and compiles none of it; with it, an adaptive
+        # step never grows past the configured h (the constraint solve's stability is set there)
+        self.interact = None
         if any(e.interact is not None for e in cfg.emitters) and self.layout.capacity:
             from .interact import Interactions
 
@@ -67,7 +69,8 @@ class ParticleSystem(SystemBase):
         self.atol, self.rtol = atol, sol.tolerance
         self.tol_g = EVENT_TOL * atol  # impacts located to this distance from the surface (m)
         self.driver = Driver(self, StepPolicy(
-            h=sol.h, adaptive=self.adaptive, rtol=sol.tolerance, atol=atol, h_max=H_MAX_FACTOR * sol.h,
+            h=sol.h, adaptive=self.adaptive, rtol=sol.tolerance, atol=atol,
+            h_max=(1 if self.interact is not None else H_MAX_FACTOR) * sol.h,
             max_steps=sol.max_steps_per_frame,
             max_steps_hint="raise solver.tolerance or solver.max_steps_per_frame"), stats)
         self._alive = None  # the live count, read back when first asked after an advance
