@@ -77,7 +77,8 @@ class SoftBody(SystemBase):
                                    integrator=integrator, substeps=cfg.substeps,
                                    xpbd_iterations=cfg.iterations, max_stretch=cfg.max_stretch,
                                    name=f"bodies[{index}] ({cfg.type})",
-                                   contacts=contacts if cfg.contacts else 0)
+                                   contacts=contacts if cfg.contacts else 0,
+                                   self_collision=cfg.thickness if cfg.self_collision else 0.0)
         self.control = control
         self.pinned = np.array(self.topology.pinned, np.int64)
         self.pin_home = self.topology.positions[self.pinned].copy() if len(self.pinned) else None

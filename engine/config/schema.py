@@ -155,6 +155,61 @@ class SubEmitter(Strict):
     min_speed: NonNeg = 1.0
 
 
+INTERACT_KINDS = ("granular", "fluid", "gravity", "repel")
+MAX_INTERACT_RADIUS = 1.0  # m: a grid cell is 2–4 radii; larger grains belong to rigid bodies
+MAX_DIRECT = 20_000  # gravity slots summed over all pairs at most (no approximation beyond is built)
+# keys that mean something for one kind only (a key for another kind is refused, naming its kind)
+_KIND_KEYS = {"friction": "granular", "cohesion": "granular", "G": "gravity", "softening": "gravity",
+              "mass": "gravity", "viscosity": "fluid", "vorticity": "fluid", "surface_tension": "fluid"}
+
+
+class Interact(Strict):
+    """Particles of emitters of the same ``kind`` interact with each other (engine.particles.interact).
+
+    granular: grains of ``radius`` (m) in contact at 2·radius, ``friction`` μ (position-based,
+    static = kinetic), ``cohesion`` in [0, 1] (fraction of a small gap closed per iteration).
+    fluid: position-based fluid at rest spacing 2·radius; ``viscosity`` (XSPH c, a fraction),
+    ``vorticity`` (confinement ε, m/s), ``surface_tension`` (cohesion acceleration, m/s²).
+    gravity: softened pair attraction, ``G`` (m³/(kg·s²)), ``softening`` ε (m), ``mass`` per particle
+    (kg); ``radius`` is unused by the pair sum but kept for a uniform table. repel: pairs closer
+    than 2·radius pushed softly apart. ``iterations``: Jacobi sweeps per step."""
+
+    kind: str
+    radius: float
+    friction: float = 0.5
+    cohesion: float = 0.0
+    G: float = 1.0
+    softening: float = 0.05
+    mass: Annotated[float, Field(gt=0, le=1e30)] = 1.0
+    viscosity: Annotated[float, Field(ge=0, le=1)] = 0.02
+    vorticity: Annotated[float, Field(ge=0, le=100)] = 0.0
+    surface_tension: Annotated[float, Field(ge=0, le=1e3)] = 0.0
+    iterations: Annotated[int, Field(ge=1, le=20)] = 4
+
+    @model_validator(mode="after")
+    def _check(self):
+        given = self.model_fields_set
+        problems = [
+            ("kind", f"{self.kind!r} is not a kind of interaction (kinds: {', '.join(INTERACT_KINDS)})"
+             if self.kind not in INTERACT_KINDS else None),
+            ("radius", f"must be > 0, got {self.radius:g}" if self.radius <= 0 else
+             f"{self.radius:g} m is larger than the grid allows ({MAX_INTERACT_RADIUS:g} m)"
+             if self.radius > MAX_INTERACT_RADIUS else None),
+            ("friction", f"must be >= 0, got {self.friction:g}" if self.friction < 0 else
+             "must be <= 10" if self.friction > 10 else None),
+            ("cohesion", f"must lie in [0, 1], got {self.cohesion:g}"
+             if not 0 <= self.cohesion <= 1 else None),
+            ("G", f"must be >= 0, got {self.G:g}" if self.G < 0 else
+             "must be <= 1e6" if self.G > 1e6 else None),
+            ("softening", f"must be > 0, got {self.softening:g}" if not 0 < self.softening <= 1e3 else None),
+        ]
+        if self.kind in INTERACT_KINDS:
+            for key, kind in _KIND_KEYS.items():
+                if key in given and kind != self.kind:
+                    problems.append((key, f"applies to kind {kind!r} only, not {self.kind!r}"))
+        return _report(self, problems)
+
+
 class Emitter(Strict):
     name: Name = ""
     effect: Optional[Name] = None  # a preset from effects/ that this emitter starts from
@@ -192,6 +247,7 @@ class Emitter(Strict):
     streak: NonNeg = 0.0  # draw a motion streak of streak × velocity (seconds)
     # "local": live particles are carried with the emitter's motion (a jet on a moving ship)
     space: Literal["world", "local"] = "world"
+    interact: Optional[Interact] = None  # particles of emitters of one kind interact (Interact)
 
     @model_validator(mode="after")
     def _check(self):
@@ -316,6 +372,7 @@ class Body(Strict):
     thickness: Annotated[float, Field(ge=0, le=1)] = 0.015  # m kept between nodes and colliders
     color: Annotated[List[Annotated[float, Field(ge=0, le=10)]], Field(min_length=3, max_length=3)] = [0.55, 0.6, 0.7]
     contacts: bool = False  # record node–collider contacts (the game API's contacts(body=name))
+    self_collision: bool = False  # nodes no spring joins keep 2 × thickness apart (the shared grid)
 
     @model_validator(mode="after")
     def _check(self):
@@ -329,6 +386,8 @@ class Body(Strict):
             ("direction", f"must not be zero, got {self.direction}"
              if math.fsum(c * c for c in self.direction) < 1e-12 else None),
             ("pin_path", _check_path(self.pin_path)),
+            ("self_collision", "needs thickness > 0 (nodes collide at 2 × thickness)"
+             if self.self_collision and self.thickness <= 0 else None),
         ])
 
 
@@ -376,6 +435,33 @@ class Render(Strict):
     density_shading: Annotated[float, Field(ge=0, le=20)] = 0.6  # thick smoke/dust darkens
     # large soft sprites drawn into a reduced buffer (Cantlay 2007): "auto", or 1 (off), 0.5, 0.25
     particle_resolution: Literal["auto", 1, 0.5, 0.25] = "auto"
+
+
+def _check_interact(emitters, slots):
+    """Emitters of one kind share one interact table; gravity's pair sum stays under MAX_DIRECT
+    slots; the grid and its fields fit the memory budget (estimated before allocation)."""
+    from ..geometry.sizing import MAX_GRID_BYTES, interact_bytes
+
+    problems, first = [], {}
+    for i, em in enumerate(emitters):
+        it = em.interact
+        if it is None:
+            continue
+        key = ("emitters", i, "interact")
+        j = first.setdefault(it.kind, i)
+        if j != i and emitters[j].interact != it:
+            problems.append((key, f"emitters of kind {it.kind!r} share one table; emitters[{j}]'s differs"))
+    grav = sum(n for em, n in zip(emitters, slots) if em.interact is not None and em.interact.kind == "gravity")
+    if grav > MAX_DIRECT:
+        problems.append((("emitters", first["gravity"], "interact"), f"gravity over {grav:,} slots; the pair "
+                         f"sum takes at most {MAX_DIRECT:,} (lower rate or lifetime, or set capacity)"))
+    if first:
+        need = interact_bytes(sum(slots), "fluid" in first)
+        if need > MAX_GRID_BYTES:
+            problems.append((("emitters", min(first.values()), "interact"),
+                             f"the grid over {sum(slots):,} slots needs {need / 2**30:.1f} GiB; at most "
+                             f"{MAX_GRID_BYTES / 2**30:.0f} GiB (lower rate or lifetime, or set capacity)"))
+    return problems
 
 
 class Scene(Strict):
@@ -434,6 +520,7 @@ class Scene(Strict):
             problems.append(("duration", f"{self.duration:g} s at fps {self.fps:g} is "
                              f"{self.frame_count:,} frames; at most {MAX_FRAMES:,}"))
         slots = pool_sizes(self.emitters, 1.0 / self.fps)
+        problems += _check_interact(self.emitters, slots)
         if sum(slots) > MAX_POOL:
             e = max(range(len(slots)), key=slots.__getitem__)
             problems.append(("emitters", f"the pool would need {sum(slots):,} particle slots "

@@ -57,12 +57,20 @@ class ParticleSystem(SystemBase):
                                              self.method, self.adaptive, sol.extrapolate,
                                              events=self.emitters.uses_events, contacts=contacts,
                                              impacts=sol.impacts, quadratic=self.forces.names == ["gravity"])
+        # a scene without interact imports, allocates and compiles none of it; with it, an adaptive
+        # step never grows past the configured h (the constraint solve's stability is set there)
+        self.interact = None
+        if any(e.interact is not None for e in cfg.emitters) and self.layout.capacity:
+            from .interact import Interactions
+
+            self.interact = Interactions(self.state, cfg.emitters, rows, colliders)
         self.order = METHODS[self.method].order
         atol = sol.atol if sol.atol is not None else sol.tolerance
         self.atol, self.rtol = atol, sol.tolerance
         self.tol_g = EVENT_TOL * atol  # impacts located to this distance from the surface (m)
         self.driver = Driver(self, StepPolicy(
-            h=sol.h, adaptive=self.adaptive, rtol=sol.tolerance, atol=atol, h_max=H_MAX_FACTOR * sol.h,
+            h=sol.h, adaptive=self.adaptive, rtol=sol.tolerance, atol=atol,
+            h_max=(1 if self.interact is not None else H_MAX_FACTOR) * sol.h,
             max_steps=sol.max_steps_per_frame,
             max_steps_hint="raise solver.tolerance or solver.max_steps_per_frame"), stats)
         self._alive = None  # the live count, read back when first asked after an advance
@@ -93,7 +101,7 @@ class ParticleSystem(SystemBase):
         held, self._held = self._held, None
         self.emitters.spawn(held[1] if held is not None and held[0] == (t0, h, j) else self.emitters.plan(t, h))
         k = 1
-        if not self._move_colliders(t, t + h) and not self.emitters.uses_events:
+        if not self._move_colliders(t, t + h) and not self.emitters.uses_events and self.interact is None:
             while j + k < min(n, j + MAX_RUN):
                 due = self.emitters.plan(t0 + (j + k) * h, h)
                 if due is not None:
@@ -105,6 +113,8 @@ class ParticleSystem(SystemBase):
                 integrate.step_fixed(self.integrator, t, h)
             else:
                 integrate.step_fixed_run(self.integrator, t0, h, j, k)
+            if self.interact is not None:  # (k == 1: interacting particles take no fused runs)
+                self.interact.step(h)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t0 + (j + k) * h)
         return k
@@ -119,6 +129,8 @@ class ParticleSystem(SystemBase):
     def commit(self, t: float, h: float) -> None:
         if self.layout.capacity:
             integrate.commit(self.integrator, t, h)
+            if self.interact is not None:
+                self.interact.step(h)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t + h)
 
@@ -148,6 +160,8 @@ class ParticleSystem(SystemBase):
             return f"its pool needs {need:,} slots, {self.layout.spare:,} spare"
         if any(e.sub_emitters for e in new):
             return "it has sub-emitters"
+        if any(e.interact is not None for e in new):
+            return "it interacts (the interactions are built with the scene)"
         if not self.forces.covers(cfg.forces, cfg.emitters):
             return "it needs a force term the scene did not compile"
         return None

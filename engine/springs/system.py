@@ -44,11 +44,13 @@ class SpringSystem:
                  tol: float = 1e-4, rtol=None, atol=None, accumulate: str = "gather",
                  xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 2,
                  check_stability: bool = True, dtype=ti.f32, record_energy: bool = False,
-                 control: Control = None, name: str = "", contacts: int = 0):
+                 control: Control = None, name: str = "", contacts: int = 0, self_collision: float = 0.0):
         """``control``: the scene's inputs (gravity, collider positions); without one the system
         has its own, with ``gravity`` and the colliders' own paths. ``name`` prefixes messages.
         ``contacts``: keep up to this many node–collider contact records between drains
-        (:meth:`contacts`; 0: none, and no recording is compiled)."""
+        (:meth:`contacts`; 0: none, and no recording is compiled). ``self_collision``: a thickness
+        > 0 keeps nodes that no spring joins 2 × that apart (engine.springs.self_collision, through
+        the shared neighbour grid); 0: none, nothing built."""
         ensure_init()
         if integrator not in INTEGRATORS:
             raise ValueError(f"integrator: unknown value {integrator!r}; allowed: {', '.join(INTEGRATORS)}")
@@ -89,6 +91,11 @@ class SpringSystem:
         self.contact_log = ContactBuffer(contacts if self._contacts.on else 0)
         self._bad = ti.field(ti.f64, ())
         self._bad[None] = constraints.NO_FAILURE
+        self._self = None
+        if self_collision > 0 and n:
+            from .self_collision import SelfCollision
+
+            self._self = SelfCollision(self.model, self.state, self_collision)
         self._limits = DistanceLimits(self.model, self.state) if max_stretch is not None else None
         self._doubling = StagedDoubling(self.stepper) if adaptive else None
         self.driver = Driver(self, StepPolicy(adaptive=adaptive, rtol=self.rtol, atol=self.atol))
@@ -148,6 +155,8 @@ class SpringSystem:
         """After a step of h ending at t_end that started from (x0, v0): limits, colliders."""
         if self.model.node_count == 0:
             return
+        if self._self is not None:  # before the colliders: they have the last word
+            self._self.apply(h)
         if self._limits is not None:
             self._limits.apply(self.max_stretch, self.limit_iterations)
         if self._contacts.on and self.control.colliders_move:

@@ -1,0 +1,138 @@
+"""A deterministic hashed neighbour grid (Green, "Particle Simulation using CUDA": hash cells, sort
+by cell, cell starts, a 27-cell search), rebuilt every step from the slots a caller marks.
+
+Cells are cubes of side ``cell`` (m) indexed by ``floor(x / cell)`` (int32 per axis) and hashed into
+a power-of-two table (Teschner et al. 2003's primes), so space is unbounded and memory follows the
+slot count, never the scene's extent. The build is one kernel of top-level loops (each a parallel
+loop; Taichi runs them in order):
+
+1. clear the bucket counts; 2. count: each member slot's cell and bucket, ``count[b] += 1`` with an
+integer atomic (the same counts in any thread order); 3. an exclusive prefix scan of the counts in
+two levels (block sums in parallel, a serial scan of the block sums, block-local scans in
+parallel) into ``start``; 4. fill: each member takes a place in its bucket with an integer atomic
+(the place depends on thread timing) … 5. … so each bucket is then insertion-sorted by slot, which
+makes ``sorted`` a pure function of the members and positions: a stable order by slot within each
+bucket, whatever the thread count.
+
+No cap anywhere: a bucket holds as many slots as hash to it (buckets are ranges of one array sized
+to the pool). A slot whose cell index does not fit in 30 bits (or whose position is not finite) is
+left out of the grid and counted in ``ungridded`` (reported, as pools count dropped particles);
+``max_bucket`` reports the fullest bucket of the last build. Readers gather per particle: visit the
+27 cells around ``cell_of(x)``, and within each the slots of its bucket whose ``slot_cell`` is that
+cell (two cells that share a bucket are told apart, so each neighbour is seen exactly once).
+"""
+
+import taichi as ti
+
+from .sizing import BLOCK, MAX_CELL_INDEX, table_size
+
+_P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003, "Optimized spatial hashing"
+
+
+@ti.data_oriented
+class HashGrid:
+    """The grid over ``capacity`` slots with cells of side ``cell`` metres.
+
+    Fields: ``sorted`` (i32, capacity: member slots, grouped by bucket, by slot within one);
+    ``start`` (i32, table + 1: bucket b holds ``sorted[start[b]:start[b + 1]]``); ``slot_cell``
+    (vec3 i32: each slot's cell at the last build); ``slot_bucket`` (i32: −1 when not in the grid);
+    ``members``, ``ungridded``, ``max_bucket`` (i32 scalars of the last build)."""
+
+    built = 0  # grids constructed in this process: a scene without interactions builds none
+
+    def __init__(self, capacity: int, cell: float):
+        HashGrid.built += 1
+        self.cap = max(1, int(capacity))
+        self.cell = float(cell)
+        self.inv_cell = 1.0 / self.cell
+        self.table = table_size(self.cap)
+        self.blocks = self.table // BLOCK
+        self.mask = self.table - 1
+        self.count = ti.field(ti.i32, shape=self.table)
+        self.fill = ti.field(ti.i32, shape=self.table)
+        self.start = ti.field(ti.i32, shape=self.table + 1)
+        self.block_sum = ti.field(ti.i32, shape=self.blocks)
+        self.sorted = ti.field(ti.i32, shape=self.cap)
+        self.slot_bucket = ti.field(ti.i32, shape=self.cap)
+        self.slot_cell = ti.Vector.field(3, ti.i32, shape=self.cap)
+        self.members = ti.field(ti.i32, shape=())
+        self.ungridded = ti.field(ti.i32, shape=())
+        self.max_bucket = ti.field(ti.i32, shape=())
+
+    @ti.func
+    def cell_of(self, x):
+        """The cell (vec3 i32) holding point x (m)."""
+        return ti.floor(x * self.inv_cell, ti.i32)
+
+    @ti.func
+    def bucket(self, c):
+        """The bucket of cell c: Teschner's hash in uint32 (wraps by definition), masked."""
+        h = (ti.cast(c[0], ti.u32) * ti.u32(_P1)) ^ (ti.cast(c[1], ti.u32) * ti.u32(_P2)) \
+            ^ (ti.cast(c[2], ti.u32) * ti.u32(_P3))
+        return ti.cast(h & ti.u32(self.mask), ti.i32)
+
+    @ti.func
+    def neighbour_cell(self, c, n):
+        """The n-th (0..26) cell of the 3×3×3 block around c, in a fixed order."""
+        return c + ti.Vector([n % 3 - 1, (n // 3) % 3 - 1, n // 9 - 1])
+
+    @ti.kernel
+    def build(self, pos: ti.template(), member: ti.template()):
+        """Rebuild from the slots with ``member[i] != 0`` at positions ``pos`` (vec3 f32, m)."""
+        for b in range(self.table):
+            self.count[b] = 0
+            self.fill[b] = 0
+        self.ungridded[None] = 0
+        self.max_bucket[None] = 0
+        for i in range(self.cap):
+            b = -1
+            if member[i] != 0:
+                q = pos[i] * self.inv_cell
+                lim = ti.cast(MAX_CELL_INDEX, ti.f32)
+                # a NaN fails every comparison, so it is left out here too
+                if ti.abs(q[0]) < lim and ti.abs(q[1]) < lim and ti.abs(q[2]) < lim:
+                    c = ti.floor(q, ti.i32)
+                    self.slot_cell[i] = c
+                    b = self.bucket(c)
+                    ti.atomic_add(self.count[b], 1)
+                else:
+                    ti.atomic_add(self.ungridded[None], 1)
+            self.slot_bucket[i] = b
+        for k in range(self.blocks):  # level 1: each block's total
+            s = 0
+            for m in range(BLOCK):
+                s += self.count[k * BLOCK + m]
+            self.block_sum[k] = s
+        for _ in range(1):  # level 2: exclusive scan of the block totals (one thread, T/1024 adds)
+            run = 0
+            for k in range(self.blocks):
+                s = self.block_sum[k]
+                self.block_sum[k] = run
+                run += s
+            self.start[self.table] = run
+        for k in range(self.blocks):  # level 3: block-local scans from each block's offset
+            run = self.block_sum[k]
+            for m in range(BLOCK):
+                b = k * BLOCK + m
+                self.start[b] = run
+                run += self.count[b]
+        for i in range(self.cap):
+            b = self.slot_bucket[i]
+            if b >= 0:
+                self.sorted[self.start[b] + ti.atomic_add(self.fill[b], 1)] = i
+        for b in range(self.table):  # per-bucket insertion sort by slot: the order no longer
+            lo, hi = self.start[b], self.start[b] + self.count[b]  # depends on the fill's timing
+            for k in range(lo + 1, hi):
+                v = self.sorted[k]
+                m = k - 1
+                while m >= lo and self.sorted[m] > v:
+                    self.sorted[m + 1] = self.sorted[m]
+                    m -= 1
+                self.sorted[m + 1] = v
+            ti.atomic_max(self.max_bucket[None], hi - lo)
+        self.members[None] = self.start[self.table]
+
+    def stats(self) -> dict:
+        """The last build's integer counts (one read-back each)."""
+        return {"members": int(self.members[None]), "ungridded": int(self.ungridded[None]),
+                "max_bucket": int(self.max_bucket[None]), "table": self.table}

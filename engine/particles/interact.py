@@ -1,0 +1,446 @@
+"""Particles that interact: position-based constraints and pair forces inside the pool's step.
+
+After the integrator's step (forces, colliders) the pool's step calls :meth:`Interactions.step`
+(Lie splitting: first order in h for the coupling, whatever the integrator's own order):
+
+- the deterministic neighbour grid (:class:`~engine.geometry.grid.HashGrid`) is rebuilt from the
+  live, born slots of emitters with a grid kind;
+- ``iterations`` Jacobi sweeps of position constraints (Müller et al. 2007, position based
+  dynamics; Jacobi because each particle gathers its own correction from its neighbours' positions
+  of the previous sweep: no float atomics, the same bytes for any thread count). Every pair's
+  correction is exactly antisymmetric in IEEE arithmetic (a − b = −(b − a), products of negated
+  pairs are exact), so momentum is conserved up to the rounding of each particle's sum;
+  - ``granular``: contact at 2·radius with position-based friction (Macklin et al. 2014, "Unified
+    particle physics", §6.1: static friction removes the relative tangential displacement while it
+    is below μ·penetration, kinetic friction scales it to μ·penetration) and optional cohesion (a
+    pull back to touching for pairs a little apart);
+  - ``fluid``: position-based fluids (Macklin & Müller 2013): the density constraint
+    C_i = ρ_i/ρ₀ − 1 (eq. 1, clamped at 0 so a free surface is not pulled inward), λ_i (eq. 11 with
+    the relaxation ε), Δp_i (eq. 14) with the artificial pressure s_corr (eq. 13, k = 0.1, Δq = 0.2h,
+    n = 4); rest spacing s = 2·radius, kernel support h = 2s, m = 1 and ρ₀ the kernel sum over a cubic
+    lattice of spacing s, so a lattice at spacing s is exactly at rest density;
+  - ``repel``: one soft push apart of pairs closer than 2·radius (a fraction REPEL of the overlap);
+- the velocities take the corrections, v += Δx/h (the PBD velocity update v = (x* − x)/h);
+- fluid: XSPH viscosity (eq. 17), vorticity confinement (eqs. 15–16) and a surface-tension term
+  (the cohesion kernel of Akinci et al. 2013, "Versatile surface tension and adhesion for SPH");
+- ``gravity``: a kick v += h·a(x) with softened pair attraction a_i = G m Σ_j r_ij/(|r_ij|² + ε²)^{3/2},
+  over all pairs (a per-i gather; the schema refuses more than MAX_DIRECT gravity slots: no
+  approximation beyond is built);
+- every member is projected onto the colliders again (after the constraint solve), so every kind
+  still collides with them.
+"""
+import math
+
+import numpy as np
+import taichi as ti
+
+from ..geometry.grid import HashGrid
+
+KINDS = {"granular": 1, "fluid": 2, "gravity": 3, "repel": 4}
+GRID_KINDS = ("granular", "fluid", "repel")
+COHESION_RANGE = 0.1  # cohesion pulls pairs up to 2r·(1 + 0.1) apart back toward touching
+GRANULAR_RELAX = 0.5  # Jacobi relaxation: a fixed factor (not 1/contact count: that breaks momentum)
+# the speed a granular grain may leave a solve with (when above its speed before): a fraction of 2r/h: overlaps a step starts with
+# (grains born into one another, a fast stream landing) are resolved without flinging grains out —
+# a bound in the spirit of Macklin et al. 2014's pre-stabilisation (§4.4); resting piles never reach it
+GRANULAR_MAX_SPEED = 0.1
+REPEL = 0.25  # fraction of a repel overlap removed per step (soft)
+S_CORR_K, S_CORR_DQ, S_CORR_N = 0.1, 0.2, 4  # Macklin & Müller 2013, §4 (k, Δq/h, n)
+FLUID_EPS = 0.01  # λ relaxation ε, as a fraction of the lattice's Σ|∇C|²
+
+
+def poly6(r, h):
+    """Müller et al. 2003's poly6 kernel W(r, h), 1/m³."""
+    return 315.0 / (64.0 * math.pi * h ** 9) * (h * h - r * r) ** 3 if r < h else 0.0
+
+
+def spiky_grad(r, h):
+    """|∇W_spiky(r, h)|, 1/m⁴ (the gradient points along −r̂)."""
+    return 45.0 / (math.pi * h ** 6) * (h - r) ** 2 if 0 < r < h else 0.0
+
+
+def lattice_constants(s, h):
+    """ρ₀ = Σ W over a cubic lattice of spacing s (self included) and G₀ = Σ_k |∇_k C|² there
+    (the denominator of λ at rest), both with m = 1."""
+    n = int(math.ceil(h / s))
+    rho, grads = 0.0, []
+    for a in range(-n, n + 1):
+        for b in range(-n, n + 1):
+            for c in range(-n, n + 1):
+                r = s * math.sqrt(a * a + b * b + c * c)
+                rho += poly6(r, h)
+                if r > 0:
+                    g = spiky_grad(r, h)
+                    grads.append(np.array([a, b, c], float) * s / r * g)
+    grads = np.array(grads) / rho
+    g0 = float((grads ** 2).sum() + (grads.sum(0) ** 2).sum())
+    return rho, g0
+
+
+@ti.data_oriented
+class Interactions:
+    """The interactions of one scene's pool (built once; kernels compiled for the kinds present).
+
+    ``configs``: the emitter configs (their ``interact`` tables; emitters of one kind share one
+    table, the schema checks it); ``rows``: emitter rows allocated. Per-slot fields (capacity):
+    ``slot_kind`` (i32, 0: none), ``member`` (i32: in the grid), ``x_pre``/``v_pre`` (vec3 f32: at
+    the step's end before the solve, m and m/s), ``corr`` (vec3 f32: the solve's total Δx, m),
+    ``delta`` (a sweep's Jacobi Δx); fluid adds ``lam`` (f32), ``omega`` (vec3, 1/s), ``vbuf``."""
+
+    def __init__(self, state, configs, rows: int, colliders):
+        self.state, self.cap = state, max(1, state.capacity)
+        self.colliders = colliders
+        self.has_colliders = colliders is not None and colliders.count > 0
+        self.params = {}
+        kinds = np.zeros(max(1, rows), np.int32)
+        for e, c in enumerate(configs):
+            if c.interact is not None:
+                kinds[e] = KINDS[c.interact.kind]
+                self.params.setdefault(c.interact.kind, c.interact)
+        self.emitter_kind = ti.field(ti.i32, shape=len(kinds))
+        self.emitter_kind.from_numpy(kinds)
+        self.granular, self.fluid = "granular" in self.params, "fluid" in self.params
+        self.gravity, self.repel = "gravity" in self.params, "repel" in self.params
+        n = self.cap
+        self.slot_kind = ti.field(ti.i32, shape=n)
+        self.member = ti.field(ti.i32, shape=n)
+        self.x_pre, self.v_pre = ti.Vector.field(3, ti.f32, shape=n), ti.Vector.field(3, ti.f32, shape=n)
+        self.corr, self.delta = ti.Vector.field(3, ti.f32, shape=n), ti.Vector.field(3, ti.f32, shape=n)
+        self.press = ti.field(ti.f32, shape=n)  # how far the colliders pushed back during the solve, m
+        self.iterations = max([int(p.iterations) for k, p in self.params.items() if k != "gravity"] or [0])
+        cell = 0.0
+        self.g_coh, self.f_vort, self.f_tension = 0.0, 0.0, 0.0  # (compile-time switches below)
+        if self.granular:
+            p = self.params["granular"]
+            self.g_d = 2.0 * p.radius
+            self.g_mu, self.g_coh = float(p.friction), float(p.cohesion)
+            self.g_reach = self.g_d * (1.0 + COHESION_RANGE) if self.g_coh > 0 else self.g_d
+            cell = max(cell, self.g_reach)
+        if self.fluid:
+            p = self.params["fluid"]
+            self.f_s = 2.0 * p.radius
+            self.f_h = 2.0 * self.f_s
+            self.f_rho0, g0 = lattice_constants(self.f_s, self.f_h)
+            self.f_eps = FLUID_EPS * g0
+            self.f_scorr = S_CORR_K / g0  # s_corr as a density error of k (scale-free, see module doc)
+            self.f_wdq = poly6(S_CORR_DQ * self.f_h, self.f_h)
+            self.f_visc, self.f_vort, self.f_tension = float(p.viscosity), float(p.vorticity), float(p.surface_tension)
+            h = self.f_h
+            self.f_cmax = 32.0 / (math.pi * h ** 9) * (h / 2) ** 6  # Akinci's C at its peak r = h/2
+            self.lam = ti.field(ti.f32, shape=n)
+            self.omega = ti.Vector.field(3, ti.f32, shape=n)
+            self.vbuf = ti.Vector.field(3, ti.f32, shape=n)
+            cell = max(cell, self.f_h)
+        if self.repel:
+            self.r_d = 2.0 * self.params["repel"].radius
+            cell = max(cell, self.r_d)
+        if self.gravity:
+            p = self.params["gravity"]
+            self.gm = float(p.G) * float(p.mass)
+            self.eps2 = float(p.softening) ** 2
+        self.grid = HashGrid(n, cell) if cell > 0 else None
+
+    # -- per-step entry --------------------------------------------------------------------------
+    def step(self, h: float) -> None:
+        """Interact over the step of h just taken (positions and velocities at its end)."""
+        self.prepare()
+        if self.grid is not None:
+            self.grid.build(self.state.particle_pos, self.member)
+            for _ in range(self.iterations):
+                self.sweep(h)
+        self.finish(h)
+
+    def stats(self) -> dict:
+        return self.grid.stats() if self.grid is not None else {}
+
+    # -- kernels ---------------------------------------------------------------------------------
+    @ti.kernel
+    def prepare(self):
+        S = self.state
+        for i in range(self.cap):
+            k = 0
+            if S.particle_alive[i] != 0 and S.particle_age[i] > 0.0:
+                k = self.emitter_kind[S.particle_emitter[i]]
+            self.slot_kind[i] = k
+            self.member[i] = 1 if (k == 1 or k == 2 or k == 4) else 0
+            self.x_pre[i] = S.particle_pos[i]
+            self.v_pre[i] = S.particle_vel[i]
+            self.corr[i] = ti.Vector([0.0, 0.0, 0.0])
+            self.press[i] = 0.0
+
+    @ti.func
+    def _w(self, r2):
+        h2 = self.f_h * self.f_h
+        w = 0.0
+        if r2 < h2:
+            w = 315.0 / (64.0 * math.pi * self.f_h ** 9) * (h2 - r2) ** 3
+        return w
+
+    @ti.func
+    def _gw(self, r, d):
+        """∇W_spiky at r (|r| = d > 0): −45/(π h⁶)(h − d)² r̂."""
+        g = ti.Vector([0.0, 0.0, 0.0])
+        if 0.0 < d < self.f_h:
+            g = -45.0 / (math.pi * self.f_h ** 6) * (self.f_h - d) ** 2 / d * r
+        return g
+
+    @ti.func
+    def _granular(self, i, h):
+        S, G = self.state, self.grid
+        xi = S.particle_pos[i]
+        di = h * S.particle_vel[i] + self.corr[i]  # i's displacement over the step so far
+        dx = ti.Vector([0.0, 0.0, 0.0])
+        D, reach2 = self.g_d, self.g_reach * self.g_reach
+        c = G.slot_cell[i]
+        for n in range(27):
+            cc = G.neighbour_cell(c, n)
+            b = G.bucket(cc)
+            for k in range(G.start[b], G.start[b + 1]):
+                j = G.sorted[k]
+                if j != i and self.slot_kind[j] == 1 and (G.slot_cell[j] == cc).all():
+                    r = xi - S.particle_pos[j]
+                    d2 = r.dot(r)
+                    if 0.0 < d2 < reach2:
+                        d = ti.sqrt(d2)
+                        nrm = r / d
+                        if d < D:
+                            pen = D - d
+                            dx += 0.5 * pen * nrm
+                            rel = di - (h * S.particle_vel[j] + self.corr[j])
+                            t = rel - rel.dot(nrm) * nrm
+                            tl = t.norm()
+                            # static below μ·pen: all of t removed; kinetic: scaled to μ·pen
+                            dx -= 0.5 * t * ti.min(self.g_mu * pen / ti.max(tl, 1e-12), 1.0)
+                        elif ti.static(self.g_coh > 0):
+                            dx -= 0.5 * self.g_coh * (d - D) * nrm
+        return GRANULAR_RELAX * dx
+
+    @ti.func
+    def _repel(self, i):
+        S, G = self.state, self.grid
+        xi = S.particle_pos[i]
+        dx = ti.Vector([0.0, 0.0, 0.0])
+        c = G.slot_cell[i]
+        for n in range(27):
+            cc = G.neighbour_cell(c, n)
+            b = G.bucket(cc)
+            for k in range(G.start[b], G.start[b + 1]):
+                j = G.sorted[k]
+                if j != i and self.slot_kind[j] == 4 and (G.slot_cell[j] == cc).all():
+                    r = xi - S.particle_pos[j]
+                    d2 = r.dot(r)
+                    if 0.0 < d2 < self.r_d * self.r_d:
+                        d = ti.sqrt(d2)
+                        dx += 0.5 * REPEL * (self.r_d - d) / d * r
+        return dx
+
+    @ti.func
+    def _fluid_lambda(self, i):
+        """λ_i = −C_i / (Σ_k |∇_k C_i|² + ε) (Macklin & Müller 2013, eqs. 1, 8–11)."""
+        S, G = self.state, self.grid
+        xi = S.particle_pos[i]
+        rho = self._w(0.0)
+        gi = ti.Vector([0.0, 0.0, 0.0])
+        sq = 0.0
+        c = G.slot_cell[i]
+        for n in range(27):
+            cc = G.neighbour_cell(c, n)
+            b = G.bucket(cc)
+            for k in range(G.start[b], G.start[b + 1]):
+                j = G.sorted[k]
+                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
+                    r = xi - S.particle_pos[j]
+                    d2 = r.dot(r)
+                    if d2 < self.f_h * self.f_h:
+                        rho += self._w(d2)
+                        g = self._gw(r, ti.sqrt(d2)) / self.f_rho0
+                        gi += g
+                        sq += g.dot(g)
+        C = ti.max(rho / self.f_rho0 - 1.0, 0.0)
+        return -C / (sq + gi.dot(gi) + self.f_eps)
+
+    @ti.func
+    def _fluid_delta(self, i):
+        """Δp_i = (1/ρ₀) Σ_j (λ_i + λ_j + s_corr) ∇W(p_i − p_j) (eq. 14; s_corr eq. 13)."""
+        S, G = self.state, self.grid
+        xi = S.particle_pos[i]
+        li = self.lam[i]
+        dx = ti.Vector([0.0, 0.0, 0.0])
+        c = G.slot_cell[i]
+        for n in range(27):
+            cc = G.neighbour_cell(c, n)
+            b = G.bucket(cc)
+            for k in range(G.start[b], G.start[b + 1]):
+                j = G.sorted[k]
+                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
+                    r = xi - S.particle_pos[j]
+                    d2 = r.dot(r)
+                    if 0.0 < d2 < self.f_h * self.f_h:
+                        q = self._w(d2) / self.f_wdq
+                        s_corr = -self.f_scorr * q ** S_CORR_N
+                        dx += (li + self.lam[j] + s_corr) * self._gw(r, ti.sqrt(d2))
+        return dx / self.f_rho0
+
+    @ti.kernel
+    def sweep(self, h: ti.f32):
+        """One Jacobi sweep: every member's Δx from its neighbours' positions, then applied."""
+        S = self.state
+        if ti.static(self.fluid):
+            for i in range(self.cap):
+                if self.slot_kind[i] == 2:
+                    self.lam[i] = self._fluid_lambda(i)
+        for i in range(self.cap):
+            k = self.slot_kind[i]
+            dx = ti.Vector([0.0, 0.0, 0.0])
+            if ti.static(self.granular):
+                if k == 1:
+                    dx = self._granular(i, h)
+            if ti.static(self.fluid):
+                if k == 2:
+                    dx = self._fluid_delta(i)
+            if ti.static(self.repel):
+                if k == 4:
+                    dx = self._repel(i)
+            self.delta[i] = dx
+        for i in range(self.cap):
+            if self.member[i] != 0:
+                x = S.particle_pos[i] + self.delta[i]
+                if ti.static(self.has_colliders):
+                    # the colliders are constraints of every sweep too (else a grain pushed into the
+                    # ground by those above would only be put back after the solve, overlapping them)
+                    zero = ti.Vector([0.0, 0.0, 0.0])
+                    nx, _v, n_in, _k, _w, _n, _s = self.colliders.project(x, zero, self.x_pre[i], zero, h)
+                    if n_in > 0:
+                        self.press[i] += (nx - x).norm()
+                        x = nx
+                S.particle_pos[i] = x
+                self.corr[i] = x - self.x_pre[i]
+
+    @ti.func
+    def _fluid_velocity(self, i, h):
+        """XSPH (eq. 17, normalised by ρ₀), vorticity confinement (eq. 16: ε (N × ω), ε in m/s) and
+        Akinci's cohesion (γ in m/s² at the kernel's peak) for fluid slot i; the new velocity."""
+        S, G = self.state, self.grid
+        xi, vi, wi = S.particle_pos[i], S.particle_vel[i], self.omega[i]
+        xs = ti.Vector([0.0, 0.0, 0.0])
+        eta = ti.Vector([0.0, 0.0, 0.0])
+        st = ti.Vector([0.0, 0.0, 0.0])
+        hk = self.f_h
+        c = G.slot_cell[i]
+        for n in range(27):
+            cc = G.neighbour_cell(c, n)
+            b = G.bucket(cc)
+            for k in range(G.start[b], G.start[b + 1]):
+                j = G.sorted[k]
+                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
+                    r = xi - S.particle_pos[j]
+                    d2 = r.dot(r)
+                    if 0.0 < d2 < hk * hk:
+                        d = ti.sqrt(d2)
+                        xs += (S.particle_vel[j] - vi) * self._w(d2)
+                        if ti.static(self.f_vort > 0):
+                            eta += (self.omega[j].norm() - wi.norm()) * self._gw(r, d)
+                        if ti.static(self.f_tension > 0):
+                            cr = 0.0
+                            if 2.0 * d > hk:
+                                cr = (hk - d) ** 3 * d ** 3
+                            else:
+                                cr = 2.0 * (hk - d) ** 3 * d ** 3 - hk ** 6 / 64.0
+                            st -= (32.0 / (math.pi * hk ** 9) * cr / self.f_cmax) * (r / d)
+        v = vi + self.f_visc * xs / self.f_rho0
+        if ti.static(self.f_vort > 0):
+            en = eta.norm()
+            if en > 1e-12:
+                v += h * self.f_vort * (eta / en).cross(wi)
+        if ti.static(self.f_tension > 0):
+            v += h * self.f_tension * st
+        return v
+
+    @ti.func
+    def _vorticity(self, i):
+        """ω_i = Σ_j v_ij × ∇_j W(p_i − p_j) / ρ₀ (eq. 15), 1/s."""
+        S, G = self.state, self.grid
+        xi, vi = S.particle_pos[i], S.particle_vel[i]
+        w = ti.Vector([0.0, 0.0, 0.0])
+        c = G.slot_cell[i]
+        for n in range(27):
+            cc = G.neighbour_cell(c, n)
+            b = G.bucket(cc)
+            for k in range(G.start[b], G.start[b + 1]):
+                j = G.sorted[k]
+                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
+                    r = xi - S.particle_pos[j]
+                    d2 = r.dot(r)
+                    if 0.0 < d2 < self.f_h * self.f_h:
+                        w += (S.particle_vel[j] - vi).cross(-self._gw(r, ti.sqrt(d2)))
+        return w / self.f_rho0
+
+    @ti.func
+    def _gravity(self, i):
+        """a_i = G m Σ_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2} over every other gravity slot (m/s²)."""
+        S = self.state
+        xi = S.particle_pos[i]
+        a = ti.Vector([0.0, 0.0, 0.0])
+        for j in range(self.cap):
+            if j != i and self.slot_kind[j] == 3:
+                r = S.particle_pos[j] - xi
+                d2 = r.dot(r) + self.eps2
+                a += r / (d2 * ti.sqrt(d2))
+        return self.gm * a
+
+    @ti.kernel
+    def finish(self, h: ti.f32):
+        """Velocities from the corrections, the fluid's velocity terms, gravity's kick, then every
+        member projected onto the colliders (x_pre, v_pre: the step's end before the solve)."""
+        S = self.state
+        for i in range(self.cap):
+            if self.member[i] != 0:
+                v = S.particle_vel[i] + self.corr[i] / h
+                if ti.static(self.granular):
+                    if self.slot_kind[i] == 1:  # a solve may stop a grain, not fling it past the bound
+                        top = ti.max(S.particle_vel[i].norm(), GRANULAR_MAX_SPEED * self.g_d / h)
+                        s = v.norm()
+                        if s > top:
+                            v *= top / s
+                S.particle_vel[i] = v
+        if ti.static(self.f_vort > 0):
+            for i in range(self.cap):
+                if self.slot_kind[i] == 2:
+                    self.omega[i] = self._vorticity(i)
+        if ti.static(self.fluid):
+            for i in range(self.cap):
+                if self.slot_kind[i] == 2:
+                    self.vbuf[i] = self._fluid_velocity(i, h)
+        if ti.static(self.gravity):
+            for i in range(self.cap):
+                if self.slot_kind[i] == 3:
+                    self.delta[i] = S.particle_vel[i] + h * self._gravity(i)
+        for i in range(self.cap):
+            k = self.slot_kind[i]
+            if k != 0:
+                v = S.particle_vel[i]
+                if ti.static(self.fluid):
+                    if k == 2:
+                        v = self.vbuf[i]
+                if ti.static(self.gravity):
+                    if k == 3:
+                        v = self.delta[i]
+                x = S.particle_pos[i]
+                if ti.static(self.has_colliders):
+                    nx, nv, n_in, kill, _w, nrm, _s = self.colliders.project(x, v, self.x_pre[i], self.v_pre[i], h)
+                    x, v = nx, nv
+                    if ti.static(self.granular):
+                        if k == 1 and n_in > 0:
+                            # grain–collider friction at the position level (Macklin et al. 2014,
+                            # eq. 24 against a static shape): the colliders' push back in the sweeps
+                            # is the normal load (press); its tangential part is held (static) or cut by μ·load
+                            c = self.corr[i]
+                            t = c - c.dot(nrm) * nrm
+                            tl = t.norm()
+                            cut = t * ti.min(self.g_mu * self.press[i] / ti.max(tl, 1e-12), 1.0)
+                            x -= cut
+                            v -= cut / h
+                    if kill != 0:
+                        S.particle_alive[i] = 0
+                S.particle_pos[i] = x
+                S.particle_vel[i] = v
