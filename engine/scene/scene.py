@@ -92,15 +92,22 @@ class Scene:
                     self.bodies.append(old)
                 else:
                     self.bodies.append(SoftBody(b, specs, self.control, cfg.solver.integrator, k, contacts))
-        self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies)
+        self.rigid = None
+        if cfg.rigid_bodies:
+            from ..rigid import RigidSystem
+
+            self.rigid = RigidSystem(cfg, specs, self.control)
+        self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies
+                               + ([self.rigid] if self.rigid is not None else []))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
             from ..render.renderer import Renderer
 
             p = self.particles
+            meshes = self.bodies + ([self.rigid] if self.rigid is not None else [])
             self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
-                                     bodies=self.bodies, rows=p.emitters.count if p else 0)
+                                     bodies=meshes, rows=p.emitters.count if p else 0)
         self.width = int(width or cfg.render.width)
         self.height = int(height or cfg.render.height)
 
@@ -147,6 +154,8 @@ class Scene:
             self.particles.reset()
         for body in self.bodies:
             body.reset()
+        if self.rigid is not None:
+            self.rigid.reset()
 
     def warm_up(self, sizes=()) -> None:
         """Compile what a game calls: a step with a burst from every emitter and every collider
