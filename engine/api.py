@@ -28,6 +28,7 @@ import numpy as np
 
 from . import checks, reuse
 from .budget import fit, hold, particle_budget, release, set_particle_budget
+from .api_rigid import RigidAPI
 from .builder import SceneBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
 from .particles.capacity import MAX_POOL
@@ -57,7 +58,7 @@ def _discard(key, scene, token, program) -> None:
     reuse.give_back(key, scene, program)
 
 
-class ParticleScene:
+class ParticleScene(RigidAPI):
     """A scene driven from Python. Build with :meth:`from_file`, :meth:`from_dict` or
     :class:`SceneBuilder`. Several can live in one process; ``engine.runtime.init`` is called
     once for all of them (or skipped when the host initialised Taichi itself).

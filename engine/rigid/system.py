@@ -234,6 +234,18 @@ class RigidSystem(SystemBase):
         self._rest[i] = 0.0
 
     # -- driving from code (engine.api) ------------------------------------------------------------
+    def carry_from(self, old: "RigidSystem") -> None:
+        """Take the state of the bodies ``old`` has by the same name (a rebuild between frames)."""
+        names = {n: i for i, n in enumerate(old.model.names) if n}
+        for i, n in enumerate(self.model.names):
+            j = names.get(n)
+            if j is not None:
+                for k in "xqvw":
+                    getattr(self.state, k)[i] = getattr(old.state, k)[j]
+        self.t = old.t
+        if self.ode is not None:
+            self.ode.load()
+
     def _take_pending(self) -> None:
         for i, J, point in self.pending:
             self.apply_impulse_now(i, J, point)

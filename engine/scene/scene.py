@@ -97,6 +97,8 @@ class Scene:
             from ..rigid import RigidSystem
 
             self.rigid = RigidSystem(cfg, specs, self.control)
+            if previous is not None and previous.rigid is not None:
+                self.rigid.carry_from(previous.rigid)
         self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies
                                + ([self.rigid] if self.rigid is not None else []))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
