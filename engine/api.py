@@ -321,6 +321,8 @@ class ParticleScene(RigidAPI):
         if not self._contacts:
             raise RuntimeError("contacts: build the scene with contacts=True to record them")
         names = tuple(c.name for c in self.cfg.colliders)
+        if s.particles is not None:  # with rigid spheres after the config's (named after the bodies)
+            names = tuple(c.name for c in s.particles.colliders.specs)
         if b is not None:
             if not b.cfg.contacts:
                 raise RuntimeError(f"contacts: body {body!r} does not record contacts: set contacts = true "

@@ -75,6 +75,12 @@ class Joints:
         ua, ub = quat.rotate(qa, r["perp_a"]), quat.rotate(qb, r["perp_b"])
         return math.atan2(float(np.dot(cross(ub, ua), n)), float(np.dot(ub, ua)))
 
+    def gap(self, S, k: int) -> float:
+        """How far apart joint k's two anchor points are now (m): its error for ball, hinge and
+        fixed joints."""
+        *_, pa, pb = self._poses(S, self.rows[k])
+        return float(np.linalg.norm(pb - pa))
+
     def arrays(self):
         """The joints as the kernel takes them (engine.rigid.kernel.run): count, type, a, b,
         anchors, axes, reference perpendiculars, relative orientation, limits, compliance."""

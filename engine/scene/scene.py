@@ -48,6 +48,14 @@ def collider_specs(cfg_colliders):
     return out
 
 
+def rigid_sphere_specs(cfg):
+    """A moving sphere collider for particles per rigid sphere, named after the body and moved
+    to its pose at every coupling step (ParticleSystem.receive); not drawn (the body is)."""
+    return [ColliderSpec("sphere", point=b.position, radius=b.radius, restitution=b.restitution,
+                         friction=b.friction, name=b.name, visible=False, rigid=True)
+            for b in cfg.rigid_bodies if b.shape == "sphere"]
+
+
 class Scene:
     """Everything one config needs, built once. ``advance_frame()`` steps to the next frame time;
     ``render()`` draws the current state."""
@@ -69,11 +77,12 @@ class Scene:
         self.frame_dt = 1.0 / cfg.fps
         self.stats = Stats()
         specs = collider_specs(cfg.colliders)
-        self.colliders = Colliders(specs)
+        every = specs + rigid_sphere_specs(cfg) if cfg.emitters else specs  # particles' colliders
+        self.colliders = Colliders(every)
         if previous is None:
-            self.control = Control.for_scene(cfg, specs)
+            self.control = Control.for_scene(cfg, every)
         else:
-            self.control = previous.control.rebuilt(cfg, specs)
+            self.control = previous.control.rebuilt(cfg, every)
             self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
         self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate,
                                          spare) if cfg.emitters else None)
