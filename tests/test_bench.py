@@ -22,11 +22,12 @@ EXPECTED = {
     "api": ["first build of sparks", "level restart", "second copy, prepared", "3 build/discard cycles",
             "add_emitter, effect compiled", "a new render size", "argument checks per frame",
             "first call, new field (template)", "first call, new ndarray"],
+    "rigid": ["100 boxes into piles (xpbd, 20 substeps)", "1,000 free bodies, rk4 (ode path)"],
 }
 # the sections that build scenes (a compile each: frame, effects, features, cloth, output, api),
 # run `particles run` in subprocesses (startup) or start Dask workers (wedge) run with the slow
 # tests; the default run checks the table with the step and ODE sections
-SLOW = ("frame", "startup", "output", "effects", "features", "cloth", "wedge", "api")
+SLOW = ("frame", "startup", "output", "effects", "features", "cloth", "wedge", "api", "rigid")
 
 
 def check_rows(rows, sections):

@@ -75,7 +75,8 @@ class XPBDSolver:
         self.awake = np.ones(model.count, bool)
         self.nj = len(joints) if joints is not None else 0
         self.F = None
-        self._capacity = max(256, capacity)
+        # room for a box's 8-point manifolds with its neighbours: growing recompiles the kernels
+        self._capacity = max(1024, capacity, 24 * model.count)
 
     def _fields(self, nc: int):
         if self.F is None or nc > self.F.capacity:
@@ -91,6 +92,7 @@ class XPBDSolver:
                 names = "jt ja jb jra jrb jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha".split()
                 for k, arr in zip(names, self.joints.arrays()[1:]):
                     getattr(F, k).from_numpy(arr)
+            F.substep(0.0, [0.0, 0.0, 0.0], 0.0, 0.0, 0, 0)  # compile now
         return self.F
 
     def step(self, h: float, substeps: int, g, C: ContactSet, kinematic=None) -> None:
