@@ -21,7 +21,7 @@ from . import collide, quat
 from .quat import cross
 from .joints import Joints
 from .model import RigidModel, RigidState
-from .shapes import mesh
+from .shapes import BOX, mesh
 from .xpbd import ContactSet, XPBDSolver
 
 SLOP = 0.005  # m: contacts are kept this far apart before touching (and a step's motion more)
@@ -162,15 +162,25 @@ class RigidSystem(SystemBase):
                 rows.append((i, -1, pa, pb, n, float(spec.friction), float(spec.restitution)))
                 sources.append(spec.name or f"colliders[{k}]")
         pairs = collide.broad_phase(S.x, m.body_bound, margins)
-        for i, j in pairs:
-            if not (moving[i] or moving[j]):
-                continue
-            if self.joints is not None and self._jointed(i, j):
-                continue
-            gi = (m.body_radius[i], m.body_half[i], m.body_half_length[i])
-            gj = (m.body_radius[j], m.body_half[j], m.body_half_length[j])
-            for pa, pb, n in collide.pair(m.body_shape[i], m.body_shape[j], S.x[i], R[i], S.x[j], R[j], gi, gj,
-                                          margins[i] + margins[j]):
+        if len(pairs):
+            keep = moving[pairs[:, 0]] | moving[pairs[:, 1]]
+            if self.joints is not None:
+                keep &= np.array([not self._jointed(i, j) for i, j in pairs], bool)
+            pairs = pairs[keep]
+        boxes = (m.body_shape[pairs[:, 0]] == BOX) & (m.body_shape[pairs[:, 1]] == BOX) if len(pairs) else np.zeros(0, bool)
+        bb = pairs[boxes]
+        found = dict(zip(np.flatnonzero(boxes).tolist(), collide.box_box_batch(
+            S.x[bb[:, 0]], R[bb[:, 0]], m.body_half[bb[:, 0]], S.x[bb[:, 1]], R[bb[:, 1]], m.body_half[bb[:, 1]],
+            margins[bb[:, 0]] + margins[bb[:, 1]])))
+        for k, (i, j) in enumerate(pairs):
+            if k in found:
+                got = found[k]
+            else:
+                gi = (m.body_radius[i], m.body_half[i], m.body_half_length[i])
+                gj = (m.body_radius[j], m.body_half[j], m.body_half_length[j])
+                got = collide.pair(m.body_shape[i], m.body_shape[j], S.x[i], R[i], S.x[j], R[j], gi, gj,
+                                   margins[i] + margins[j])
+            for pa, pb, n in got:
                 rows.append((i, j, pa, pb, n, float(m.body_friction[j]), float(m.body_restitution[j])))
                 sources.append(m.names[j])
         self._wake(rows, moving)
@@ -183,16 +193,18 @@ class RigidSystem(SystemBase):
 
     def _wake(self, rows, moving) -> None:
         """An asleep body touched by a moving one faster than the sleep speed wakes up."""
-        if self.solver is None:
+        if self.solver is None or not rows:
             return
-        aw, S, spd = self.solver.awake, self.state, self.settings.sleep_speed
-        for r in rows:
-            i, j = r[0], r[1]
+        aw, S, m = self.solver.awake, self.state, self.model
+        if aw[m.dynamic].all():
+            return
+        speed = np.linalg.norm(S.v, axis=1) + np.linalg.norm(S.w, axis=1) * m.body_bound
+        active = aw & m.dynamic & (speed > self.settings.sleep_speed)
+        for i, j, *_ in rows:
             if j < 0:
                 continue
             for p, q in ((i, j), (j, i)):
-                if not aw[p] and self.model.dynamic[p] and aw[q] and self.model.dynamic[q] \
-                        and np.linalg.norm(S.v[q]) + np.linalg.norm(S.w[q]) * self.model.body_bound[q] > spd:
+                if not aw[p] and m.dynamic[p] and active[q]:
                     aw[p] = True
                     self._rest[p] = 0.0
 
