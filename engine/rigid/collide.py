@@ -329,7 +329,13 @@ def box_box_batch(xa, Ra, ha, xb, Rb, hb, margin):
             poly, n = _clip_batch(poly, n, tw, np.einsum("kc,kc->k", xr, tw) + hr[r, tt])
     c_ref = xr + hr[r, ax][:, None] * u
     depth = np.einsum("kvc,kc->kv", poly - c_ref[:, None], u)
-    good = (np.arange(8)[None, :] < n[:, None]) & (depth < margin[sel][:, None])
+    valid = np.arange(8)[None, :] < n[:, None]
+    # clipping on a face's own edge repeats a vertex (identical faces: 8 points for 4 corners);
+    # a repeated point would weigh its corner twice and turn the box
+    gap = np.linalg.norm(poly[:, :, None] - poly[:, None, :], axis=-1)
+    earlier = np.tril(np.ones((8, 8), bool), -1)[None] & valid[:, None, :]
+    repeat = ((gap < 1e-9 * (1.0 + np.abs(poly).max(-1)[:, :, None])) & earlier).any(2)
+    good = valid & ~repeat & (depth < margin[sel][:, None])
     for row, k in enumerate(sel):
         for v in np.flatnonzero(good[row]):
             p = poly[row, v]
