@@ -360,7 +360,9 @@ class Scene(Strict):
         for i, em in enumerate(self.emitters):
             for j, sub in enumerate(em.sub_emitters):
                 key = ("emitters", i, "sub_emitters", j, "emitter")
-                if sub.emitter not in names:
+                if not sub.emitter:
+                    problems.append((key, "'' is not allowed: name the emitter to feed (a named one)"))
+                elif sub.emitter not in names:
                     known = ", ".join(repr(n) for n in names if n) or "none"
                     problems.append((key, f"{sub.emitter!r} names no emitter (names: {known})"))
                 elif sub.emitter == em.name:
