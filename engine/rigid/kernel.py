@@ -125,11 +125,10 @@ def _build(F):
             solve_joint(j, h, x, q, inv_m, inv_i, *J)
 
     @ti.kernel
-    def contacts(nc: ti.i32, back: ti.i32):
+    def contacts(nc: ti.i32):
         # the position pass over the contacts, in order: depth, then static friction
         ti.loop_config(serialize=True)
-        for kk in range(nc):
-            k = order(kk, nc, back)
+        for k in range(nc):
             a, b = ca[k], cb[k]
             n = cn[k]
             lam[k] = 0.0
@@ -140,8 +139,7 @@ def _build(F):
         # static friction once every depth is resolved (λ_n final): undo the contact points'
         # tangential slip over the substep where it takes less than μ λ_n
         ti.loop_config(serialize=True)
-        for kk in range(nc):
-            k = order(kk, nc, back)
+        for k in range(nc):
             if lam[k] > 0.0:
                 a, b = ca[k], cb[k]
                 n = cn[k]
@@ -161,7 +159,7 @@ def _build(F):
                             apply_pos(x, q, inv_m, inv_i, b, rb, dlt * t, -1.0)
 
     @ti.kernel
-    def velocities(h: f64, glen: f64, nc: ti.i32, back: ti.i32):
+    def velocities(h: f64, glen: f64, nc: ti.i32):
         # v = Δx/h, ω = 2 vec(Δq q⁻¹)/h
         for i in range(nb):
             if moving[i] != 0 or kin[i] != 0:
@@ -170,8 +168,7 @@ def _build(F):
                 w[i] = rot_between(q[i], qp[i]) / h
         # velocity pass, in order: dynamic friction (at most μλ_n/h of impulse), restitution
         ti.loop_config(serialize=True)
-        for kk in range(nc):
-            k = order(kk, nc, back)
+        for k in range(nc):
             if lam[k] > 0.0:
                 a, b = ca[k], cb[k]
                 n = cn[k]
@@ -198,33 +195,23 @@ def _build(F):
                         apply_vel(v, w, q, inv_m, inv_i, a, ra, p, 1.0)
                         apply_vel(v, w, q, inv_m, inv_i, b, rb, p, -1.0)
 
-    def substep(h, g, glen, frac, nc, nj, back=0):
+    def substep(h, g, glen, frac, nc, nj):
         """One substep; with h = 0 it only compiles every kernel (a build pays the compile, not
         the frame where the first contact or joint appears)."""
         if h == 0.0:
             begin(1.0, g, frac, 0)
             joints(1.0, 0)
-            contacts(0, 0)
-            velocities(1.0, glen, 0, 0)
+            contacts(0)
+            velocities(1.0, glen, 0)
             return
         begin(h, g, frac, nc)
         if nj:
             joints(h, nj)
         if nc:
-            contacts(nc, back)
-        velocities(h, glen, nc, back)
+            contacts(nc)
+        velocities(h, glen, nc)
 
     return substep
-
-
-@ti.func
-def order(kk, nc, back):
-    """The contact solved kk-th: in list order, or backwards (alternate substeps run backwards, a
-    symmetric Gauss–Seidel: one order's bias does not pile up into a drift)."""
-    k = kk
-    if back != 0:
-        k = nc - 1 - kk
-    return k
 
 
 @ti.func

@@ -120,7 +120,7 @@ class XPBDSolver:
         g = np.asarray(g, np.float64)
         glen, hs = float(np.linalg.norm(g)), h / substeps
         for s in range(substeps):
-            F.substep(hs, g.tolist(), glen, (s + 1.0) / substeps, nc, self.nj, s % 2)
+            F.substep(hs, g.tolist(), glen, (s + 1.0) / substeps, nc, self.nj)
         n = m.count
         for k in "xqvw":
             getattr(S, k)[:] = getattr(F, k).to_numpy()[:n]
