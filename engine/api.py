@@ -28,6 +28,7 @@ import numpy as np
 
 from . import checks, reuse, runtime
 from .budget import fit, hold, particle_budget, release, set_particle_budget
+from .api_rigid import RigidAPI
 from .builder import ConfigBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
 from .particles.capacity import MAX_POOL
@@ -69,7 +70,7 @@ def _discard(key, scene, token, program) -> None:
     reuse.give_back(key, scene, program)
 
 
-class ParticleScene:
+class ParticleScene(RigidAPI):
     """A scene driven from Python. Build with :meth:`from_file`, :meth:`from_dict` or
     :class:`SceneBuilder`. Several can live in one process; ``engine.runtime.init`` is called
     once for all of them (or skipped when the host initialised Taichi itself).
@@ -339,6 +340,8 @@ class ParticleScene:
         if not self._contacts:
             raise RuntimeError("contacts: build the scene with contacts=True to record them")
         names = tuple(c.name for c in self.cfg.colliders)
+        if s.particles is not None:  # with rigid spheres after the config's (named after the bodies)
+            names = tuple(c.name for c in s.particles.colliders.specs)
         if b is not None:
             if not b.cfg.contacts:
                 raise RuntimeError(f"contacts: body {body!r} does not record contacts: set contacts = true "

@@ -52,6 +52,7 @@ class ColliderSpec:
     name: str = ""
     path: List = field(default_factory=list)
     visible: bool = True
+    rigid: bool = False  # stands for a rigid body's sphere (moved from its published pose)
 
     def position_at(self, t: float) -> np.ndarray:
         from .paths import sample_path
@@ -109,7 +110,8 @@ class Colliders:
         self._t, self._moved = 0.0, False
 
     def _placed(self, positions) -> np.ndarray:
-        pos = np.asarray(positions, np.float64).reshape(self.count, 3)
+        # (the control may hold more colliders after these: rigid bodies' spheres for particles)
+        pos = np.asarray(positions, np.float64).reshape(-1, 3)[: self.count]
         return (pos + self.shift).astype(self._np) if self.shift.any() else pos.astype(self._np)
 
     def move_to(self, t: float, positions=None, since=None) -> None:
@@ -133,7 +135,8 @@ class Colliders:
     def placement(self) -> bytes:
         """Where the colliders are now, as bytes (normals and radii never change): what a cached
         background depends on. Read from the host copy, so it costs no kernel launch."""
-        return self._pos[: self.count].tobytes()
+        shown = [k for k, s in enumerate(self.specs) if s.visible]
+        return self._pos[shown].tobytes()
 
     def index(self, name: str) -> int:
         for k, s in enumerate(self.specs):

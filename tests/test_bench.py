@@ -25,11 +25,12 @@ EXPECTED = {
     "interact": ["grid build per 100k (Taichi)", "granular sweep per 100k (Taichi)",
                  "sand at 1280x720 (step + render)", "water at 1280x720 (step + render)",
                  "galaxy at 1280x720 (step + render)"],
+    "rigid": ["100 boxes into piles (xpbd, 20 substeps)", "1,000 free bodies, rk4 (ode path)"],
 }
 # the sections that build scenes (a compile each: frame, effects, features, cloth, output, api),
 # run `particles run` in subprocesses (startup) or start Dask workers (wedge) run with the slow
 # tests; the default run checks the table with the step and ODE sections
-SLOW = ("frame", "startup", "output", "effects", "features", "cloth", "wedge", "api", "interact")
+SLOW = ("frame", "startup", "output", "effects", "features", "cloth", "wedge", "api", "interact", "rigid")
 
 
 def check_rows(rows, sections):

@@ -123,8 +123,8 @@ def test_garbage_files_give_one_line_and_exit_2(junk, at):
     (lambda d: d, "is a directory"),
     (lambda d: "/proc/self/mem", "cannot read"),  # opens, but every read fails (EIO)
     (lambda d: _write(d, b"\xff\xfe not utf-8 = 1\n"), "config: "),
-    (lambda d: _write(d, b""), "emitters: a scene needs at least one emitter or one body"),
-    (lambda d: _write(d, b"emitters = []\n"), "emitters: a scene needs at least one emitter or one body"),
+    (lambda d: _write(d, b""), "emitters: a scene needs at least one emitter, body or rigid body"),
+    (lambda d: _write(d, b"emitters = []\n"), "emitters: a scene needs at least one emitter, body or rigid body"),
     (lambda d: _write(d, b"[[emitters]]\nrate = nan\n[render]\nwidth = 0\nheight = inf\n"), "emitters[0].rate"),
 ])
 def test_unreadable_and_odd_files(tmp_path, make, why):

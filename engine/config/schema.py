@@ -13,46 +13,19 @@ import math
 import re
 from typing import Annotated, List, Literal, Optional, Union
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
-from pydantic_core import InitErrorDetails, PydanticCustomError
+from pydantic import Field, field_validator, model_validator
 
 from ..ode.methods import INTEGRATORS
+from .base import (ColorStop, Finite, Fraction01, Keyframe, Name, NonNeg, Positive, ScalarStop, Strict, Vec3,  # noqa: F401
+                   _check_path, _report)
 from ..particles.capacity import MAX_POOL, pool_sizes
+from .rigid import Joint, Rigid, RigidBody, check_scene as _check_rigid
 
 BODY_INTEGRATORS = (*INTEGRATORS, "xpbd")  # soft bodies may also take XPBD (engine.springs.xpbd)
 
 
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False,
-                              validate_default=True)
-
-
-Vec3 = Annotated[List[float], Field(min_length=3, max_length=3)]
-Finite = Annotated[float, Field(ge=-1e6, le=1e6)]
-Positive = Annotated[float, Field(gt=0, le=1e6)]
-NonNeg = Annotated[float, Field(ge=0, le=1e6)]
-Fraction01 = Annotated[float, Field(ge=0, le=1)]
-# A curve over normalised life t ∈ [0, 1]: [[t, v...], ...] with t increasing.
-ColorStop = Annotated[List[Annotated[float, Field(ge=0, le=100)]], Field(min_length=4, max_length=4)]
-ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_length=2, max_length=2)]
-
 MAX_STOPS = 8
 MAX_FRAMES = 1_000_000  # frames in one run, whether given as `frames` or as duration × fps
-
-
-def _check_item_name(name: str) -> str:
-    """A name the API finds an emitter, collider or body by and the run summary prints: "" (or
-    no key) leaves it unnamed; otherwise printable, not blank, no control characters (newline,
-    NUL) and no leading or trailing spaces."""
-    if name and (re.search(r"[\x00-\x1f\x7f]", name) or not name.strip() or name != name.strip()):
-        raise ValueError(f"{name!r} is not allowed: a name must be printable text without control characters "
-                         f"(newline, NUL, tab), not blank and without leading or trailing spaces (\"\" or no "
-                         f"name key: unnamed)")
-    return name
-
-
-# Names of emitters, colliders and bodies: the API finds things by them, the run summary prints them
-Name = Annotated[str, Field(max_length=64), AfterValidator(_check_item_name)]
 
 
 def _check_curve(stops):
@@ -64,29 +37,6 @@ def _check_curve(stops):
     if any(t < 0 or t > 1 for t in ts) or any(b < a for a, b in zip(ts, ts[1:])):
         return f"stop times must lie in [0, 1] and increase, got {ts}"
     return None
-
-
-def _check_path(path):
-    """Keyframe times must increase: the message names the first keyframe that does not (a path
-    may hold a million keyframes; the message stays one short line)."""
-    for i in range(1, len(path or ())):
-        a, b = path[i - 1].time, path[i].time
-        if b <= a:
-            return (f"keyframe times must increase: keyframe {i} has time {b:g}, not after keyframe {i - 1}'s "
-                    f"{a:g} ({len(path):,} keyframes)")
-    return None
-
-
-def _report(model, problems):
-    """Raise every cross-key problem found in ``model`` at once, each at its own key:
-    ``problems`` is a list of (key, message) with message None for "no problem"."""
-    errors = [InitErrorDetails(type=PydanticCustomError("config_check", "{text}", {"text": text}),
-                               loc=key if isinstance(key, tuple) else (key,),
-                               input=getattr(model, key, None) if isinstance(key, str) else None)
-              for key, text in problems if text]
-    if errors:
-        raise ValidationError.from_exception_data(type(model).__name__, errors)
-    return model
 
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
@@ -127,13 +77,6 @@ def _repeated_names(names) -> Optional[str]:
     them out of reach. Unnamed ("") items may repeat."""
     dup = sorted({n for n in names if n and names.count(n) > 1})
     return f"names must be unique, repeated: {', '.join(repr(n) for n in dup)}" if dup else None
-
-
-class Keyframe(Strict):
-    """A point on a path: where something is at ``time`` (linear in between, held at the ends)."""
-
-    time: NonNeg
-    position: Vec3
 
 
 class Burst(Strict):
@@ -478,6 +421,9 @@ class Scene(Strict):
     emitters: Annotated[List[Emitter], Field(max_length=64)] = []
     bodies: Annotated[List[Body], Field(max_length=32)] = []
     colliders: Annotated[List[Collider], Field(max_length=64)] = []
+    rigid: Rigid = Rigid()
+    rigid_bodies: Annotated[List[RigidBody], Field(max_length=20_000)] = []
+    joints: Annotated[List[Joint], Field(max_length=1024)] = []
 
     @field_validator("name")
     @classmethod
@@ -493,8 +439,8 @@ class Scene(Strict):
     def _check(self):
         problems = [("frames", "give either duration or frames, not both"
                      if self.duration is not None and self.frames is not None else None),
-                    ("emitters", "a scene needs at least one emitter or one body"
-                     if not self.emitters and not self.bodies else None)]
+                    ("emitters", "a scene needs at least one emitter, body or rigid body"
+                     if not self.emitters and not self.bodies and not self.rigid_bodies else None)]
         names = [e.name for e in self.emitters]
         targets = set()
         for i, em in enumerate(self.emitters):
@@ -514,8 +460,10 @@ class Scene(Strict):
                                  "to be another emitter's sub-emitter, or emitting = false (driven "
                                  "from code)"))
         for key, items in (("emitters", self.emitters), ("colliders", self.colliders),
-                           ("bodies", self.bodies)):
+                           ("bodies", self.bodies), ("rigid_bodies", self.rigid_bodies),
+                           ("joints", self.joints)):
             problems.append((key, _repeated_names([x.name for x in items])))
+        problems += _check_rigid(self)
         if self.frames is None and self.duration is not None and self.frame_count > MAX_FRAMES:
             problems.append(("duration", f"{self.duration:g} s at fps {self.fps:g} is "
                              f"{self.frame_count:,} frames; at most {MAX_FRAMES:,}"))

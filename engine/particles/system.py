@@ -76,6 +76,23 @@ class ParticleSystem(SystemBase):
         self._alive = None  # the live count, read back when first asked after an advance
         self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
 
+    def receive(self, coupling) -> None:
+        """Rigid bodies' shapes published on the board move the sphere colliders named after
+        them (a moving collider from its pose at the coupling step's start to its end: particles
+        bounce off a rolling ball, its velocity inferred). Other shapes: the shape table's work."""
+        for _pub, shapes in coupling.get("rigid_shapes"):
+            for sh in shapes:
+                k = self._rigid_colliders.get(sh["name"])
+                if k is not None:
+                    self.control.move_collider(k, coupling.t0, coupling.t1, sh["position"])
+
+    @property
+    def _rigid_colliders(self) -> dict:
+        """{rigid body name: index of its sphere collider}."""
+        if not hasattr(self, "_rigid_index"):
+            self._rigid_index = {s.name: k for k, s in enumerate(self.colliders.specs) if getattr(s, "rigid", False)}
+        return self._rigid_index
+
     def advance(self, t0: float, t1: float) -> None:
         """Advance from t0 to exactly t1 (the System protocol, engine.scene.system). Contact
         records accumulate until :meth:`contacts` drains them."""

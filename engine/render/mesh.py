@@ -1,4 +1,5 @@
-"""Soft bodies in the renderer: shaded triangles (cloth, jelly) and lines (chains, hair), depth-
+"""Meshes in the renderer (what systems' ``drawables()`` give: soft bodies, rigid shapes): shaded
+triangles (cloth, jelly, rigid bodies) and lines (chains, hair), depth-
 tested against the background and hiding the particles behind them. Parallel and deterministic:
 
 * **Triangles** through a visibility buffer: every triangle, in parallel, rasterises its
@@ -38,12 +39,16 @@ class MeshLayer:
     (V,) vec3 (m, unit, linear RGB), ``tri_idx`` (T,) and ``line_idx`` (L,) vertex indices."""
 
     def __init__(self, bodies):
+        """``bodies``: anything drawn as a mesh, through its ``drawables()``: ``positions`` (a
+        callable giving (V, 3) world vertices at draw time), ``triangles`` (T, 3), ``lines``
+        (L, 2) and ``color`` ((3,) for all vertices or (V, 3))."""
         self.bodies = list(bodies)
-        nv = [len(b.topology.positions) for b in self.bodies]
+        self.draws = [b.drawables() for b in self.bodies]
+        nv = [len(d["positions"]()) for d in self.draws]
         offsets = np.cumsum([0] + nv[:-1]).astype(np.int64)
         self.nv = int(sum(nv))
-        tris = [b.triangles + o for b, o in zip(self.bodies, offsets) if len(b.triangles)]
-        lines = [b.lines + o for b, o in zip(self.bodies, offsets) if len(b.lines)]
+        tris = [np.asarray(d["triangles"]) + o for d, o in zip(self.draws, offsets) if len(d["triangles"])]
+        lines = [np.asarray(d["lines"]) + o for d, o in zip(self.draws, offsets) if len(d["lines"])]
         self.tris = np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32)
         self.lines = np.concatenate(lines).astype(np.int32) if lines else np.zeros((0, 2), np.int32)
         self.tri_count, self.line_count = len(self.tris), len(self.lines)
@@ -51,8 +56,8 @@ class MeshLayer:
         self.mesh_pos = ti.Vector.field(3, ti.f32, shape=n)
         self.mesh_nrm = ti.Vector.field(3, ti.f32, shape=n)
         self.mesh_col = ti.Vector.field(3, ti.f32, shape=n)
-        cols = np.concatenate([np.tile(np.asarray(b.cfg.color, np.float32), (k, 1))
-                               for b, k in zip(self.bodies, nv)]) if self.nv else np.zeros((1, 3), np.float32)
+        cols = np.concatenate([np.broadcast_to(np.asarray(d["color"], np.float32), (k, 3))
+                               for d, k in zip(self.draws, nv)]) if self.nv else np.zeros((1, 3), np.float32)
         self.mesh_col.from_numpy(np.ascontiguousarray(cols[:n], np.float32))
         self.tri_idx = ti.Vector.field(3, ti.i32, shape=max(1, self.tri_count))
         self.line_idx = ti.Vector.field(2, ti.i32, shape=max(1, self.line_count))
@@ -72,7 +77,7 @@ class MeshLayer:
     def update(self) -> None:
         """Copy the bodies' node positions in and recompute the vertex normals."""
         if self.nv:
-            pos = np.concatenate([b.positions() for b in self.bodies]).astype(np.float32)
+            pos = np.concatenate([d["positions"]() for d in self.draws]).astype(np.float32)
             self.mesh_pos.from_numpy(pos)
             if self.tri_count:
                 self._k["normals"]()

@@ -49,6 +49,14 @@ def collider_specs(cfg_colliders):
     return out
 
 
+def rigid_sphere_specs(cfg):
+    """A moving sphere collider for particles per rigid sphere, named after the body and moved
+    to its pose at every coupling step (ParticleSystem.receive); not drawn (the body is)."""
+    return [ColliderSpec("sphere", point=b.position, radius=b.radius, restitution=b.restitution,
+                         friction=b.friction, name=b.name, visible=False, rigid=True)
+            for b in cfg.rigid_bodies if b.shape == "sphere"]
+
+
 class Scene:
     """Everything one config needs, built once. ``advance_frame()`` steps to the next frame time;
     ``render()`` draws the current state."""
@@ -70,11 +78,12 @@ class Scene:
         self.frame_dt = 1.0 / cfg.fps
         self.stats = Stats()
         specs = collider_specs(cfg.colliders)
-        self.colliders = Colliders(specs)
+        every = specs + rigid_sphere_specs(cfg) if cfg.emitters else specs  # particles' colliders
+        self.colliders = Colliders(every)
         if previous is None:
-            self.control = Control.for_scene(cfg, specs)
+            self.control = Control.for_scene(cfg, every)
         else:
-            self.control = previous.control.rebuilt(cfg, specs)
+            self.control = previous.control.rebuilt(cfg, every)
             self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
         self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate,
                                          spare) if cfg.emitters else None)
@@ -93,15 +102,24 @@ class Scene:
                     self.bodies.append(old)
                 else:
                     self.bodies.append(SoftBody(b, specs, self.control, cfg.solver.integrator, k, contacts))
-        self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies)
+        self.rigid = None
+        if cfg.rigid_bodies:
+            from ..rigid import RigidSystem
+
+            self.rigid = RigidSystem(cfg, specs, self.control)
+            if previous is not None and previous.rigid is not None:
+                self.rigid.carry_from(previous.rigid)
+        self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies
+                               + ([self.rigid] if self.rigid is not None else []))
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
         if render:
             from ..render.renderer import Renderer
 
             p = self.particles
+            meshes = self.bodies + ([self.rigid] if self.rigid is not None else [])
             self.renderer = Renderer(p.state if p else None, cfg.emitters, self.colliders, cfg.render,
-                                     bodies=self.bodies, rows=p.emitters.count if p else 0)
+                                     bodies=meshes, rows=p.emitters.count if p else 0)
         self.width = int(width or cfg.render.width)
         self.height = int(height or cfg.render.height)
 
@@ -148,6 +166,8 @@ class Scene:
             self.particles.reset()
         for body in self.bodies:
             body.reset()
+        if self.rigid is not None:
+            self.rigid.reset()
 
     def warm_up(self, sizes=()) -> None:
         """Compile what a game calls: a step with a burst from every emitter and every collider

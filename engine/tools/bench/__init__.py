@@ -10,7 +10,8 @@ optional feature and proof that an unused one compiles nothing), ``cloth`` (when
 another), ``api`` (the game API's level restart, memory over build/discard cycles, add_emitter, a
 new render size, the cost of its argument checks), ``interact`` (the neighbour grid and a
 granular sweep per 100k particles against numba, and the sand, water and galaxy configs at
-1280×720). ``quick`` uses small sizes so CI can run it in
+1280×720), ``rigid`` (1,000 boxes into piles on the XPBD
+path, 10,000 free bodies with RK4 on the ODE path). ``quick`` uses small sizes so CI can run it in
 seconds.
 """
 from __future__ import annotations
@@ -22,10 +23,10 @@ import time
 from .common import Row, format_table
 
 SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output", "wedge",
-            "api", "interact")
+            "api", "interact", "rigid")
 _MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy",
             "startup": "startup", "features": "features", "cloth": "cloth", "output": "output",
-            "wedge": "wedge", "api": "api", "interact": "interact"}
+            "wedge": "wedge", "api": "api", "interact": "interact", "rigid": "rigid"}
 
 
 def run(quick: bool = False, only=None, echo=None, quiet: bool = True):

@@ -1,0 +1,239 @@
+"""Rigid bodies on the ODE path: Baraff's state Y = (x, q, P, L) per body stepped by any of the
+five integrators through the engine's one stepper library and Driver (fixed steps of [solver] h,
+or step doubling with its tolerances), in float64.
+
+Ẏ = (v, ½[ω, 0]q, M g, 0) with v = P/M, ω = R I_b⁻¹ Rᵀ L (Baraff, "Rigid Body Simulation",
+SIGGRAPH notes): with no torque L is constant for every method, exactly (its derivative is zero),
+so torque-free rotation keeps L to rounding and the energy to the method's order. The state is 14
+numbers, (x, q | P, L, 0), so the kick–drift splittings see q-half (x, q) and p-half (P, L); q is
+normalised after every step.
+
+Contacts with the scene's planes after each step: the deepest point of a body below a plane is
+put back on it, and if it approaches, Baraff's impulse j = −(1 + e) v_n / (1/M + n·((I⁻¹(r × n)) ×
+r)) with Coulomb friction (a tangential impulse of at most μ j that stops the sliding point at
+most); e = 0 when |v_n| ≤ 2|g|h, so resting contact neither sinks nor jitters. (Body–body
+contacts and impacts located inside the step are the XPBD path's and the issue's remaining work.)"""
+# (no __future__ annotations: Taichi reads the funcs' annotations)
+
+import numpy as np
+import taichi as ti
+
+from ..ode.driver import Driver, StepPolicy
+from ..ode.methods import method as ode_method
+from ..ode.steppers import doubling_step, make_step, scaled_error
+from . import collide, quat
+from .quat import cross
+
+N = 14
+
+
+class BaraffSystem:
+    """The Driver's protocol over every body's Y. ``owner``: the RigidSystem (model, state,
+    control, colliders); ``solver_cfg``: the scene's [solver] (h, adaptive, tolerance, atol)."""
+
+    def __init__(self, owner, solver_cfg):
+        self.owner, self.model = owner, owner.model
+        m = self.model
+        self.method = owner.settings.integrator
+        self.label = f"{owner.name}: {self.method}"
+        self.order = ode_method(self.method).order
+        n = max(1, m.count)
+        self.Y = ti.Vector.field(N, ti.f64, n)
+        self.Y0 = ti.Vector.field(N, ti.f64, n)
+        self.inv_m = ti.field(ti.f64, n)
+        self.inv_i = ti.Vector.field(3, ti.f64, n)
+        self.g = ti.Vector.field(3, ti.f64, ())
+        self.err = ti.field(ti.f64, ())
+        self.inv_m.from_numpy(_pad(m.body_inv_mass, n))
+        self.inv_i.from_numpy(_pad(m.body_inv_inertia, n))
+        self.n = m.count
+        self.rtol = solver_cfg.tolerance
+        self.atol = solver_cfg.atol if solver_cfg.atol is not None else solver_cfg.tolerance
+        self.h = solver_cfg.h
+        self._k = _build(self)
+        self.driver = Driver(self, StepPolicy(h=solver_cfg.h, adaptive=solver_cfg.adaptive, rtol=self.rtol,
+                                              atol=self.atol), owner.stats)
+        self._bad = None
+        self._g = np.zeros(3)
+        self.load()
+
+    # -- state in and out ---------------------------------------------------------------------
+    def load(self) -> None:
+        """Y from the owner's (x, q, v, ω)."""
+        S, m = self.owner.state, self.model
+        Y = np.zeros((max(1, m.count), N))
+        if m.count:
+            Y[: m.count, 0:3] = S.x
+            Y[: m.count, 3:7] = S.q
+            Y[: m.count, 7:10] = S.v * m.body_mass[:, None]
+            wb = quat.rotate_inv(S.q, S.w)
+            Y[: m.count, 10:13] = quat.rotate(S.q, m.body_inertia * wb)
+        self.Y.from_numpy(Y)
+
+    def store(self, Y=None) -> None:
+        """The owner's (x, q, v, ω) from Y."""
+        S, m = self.owner.state, self.model
+        if m.count == 0:
+            return
+        Y = self.Y.to_numpy()[: m.count] if Y is None else Y
+        S.x[:] = Y[:, 0:3]
+        S.q[:] = Y[:, 3:7]
+        S.v[:] = Y[:, 7:10] / m.body_mass[:, None]
+        wb = quat.rotate_inv(S.q, Y[:, 10:13]) / np.maximum(m.body_inertia, 1e-300)
+        S.w[:] = np.where(m.dynamic[:, None], quat.rotate(S.q, wb), S.w)
+
+    def reset(self) -> None:
+        self.driver.reset()
+        self._bad = None
+        self.load()
+
+    def advance(self, t0: float, t1: float, g) -> None:
+        self._g = np.asarray(g, np.float64)
+        self.g[None] = self._g.tolist()
+        self.driver.advance(t0, t1)
+        self.store()
+
+    # -- the Driver's protocol -----------------------------------------------------------------
+    def fixed_step(self, t0, h, j, n):
+        self._k["step"](t0 + j * h, h)
+        self._contacts(h)
+        return 1
+
+    def attempt(self, t, h):
+        return float(self._k["attempt"](t, h, self.atol, self.rtol))
+
+    def commit(self, t, h):
+        self._contacts(h)
+
+    def rollback(self):
+        self._k["rollback"]()
+
+    def first_nonfinite(self):
+        if self.n and not np.isfinite(self.Y.to_numpy()[: self.n]).all():
+            return self.owner.t
+        return None
+
+    # -- contacts with the scene's planes --------------------------------------------------------
+    def _contacts(self, h: float) -> None:
+        own, m = self.owner, self.model
+        planes = [(k, s) for k, s in enumerate(own.specs) if s.kind == "plane"]
+        if not planes or m.count == 0:
+            return
+        Y = self.Y.to_numpy()
+        y = Y[: m.count]
+        q = y[:, 3:7]
+        R = quat.matrix(q)
+        gl = float(np.linalg.norm(self._g))
+        pos = own.control.collider_positions(own.t)
+        changed = False
+        for k, spec in planes:
+            nrm = np.asarray(spec.normal, np.float64)
+            nrm = nrm / np.linalg.norm(nrm)
+            found = collide.plane_contacts(m, y[:, 0:3], R, pos[k], nrm, np.zeros(m.count),
+                                           np.flatnonzero(m.dynamic))
+            deepest = {}
+            for i, pa, pb, n in found:  # one contact per body and plane: the deepest point
+                d = float(np.dot(pb - pa, n))
+                if i not in deepest or d > deepest[i][0]:
+                    deepest[i] = (d, pa, n)
+            for i, (d, pa, n) in sorted(deepest.items()):
+                changed = True
+                y[i, 0:3] += d * n  # back onto the plane
+                pa = pa + d * n
+                self._impulse(y, i, pa, n, float(spec.restitution), 0.5 * (m.body_friction[i] + spec.friction), gl, h)
+        if changed:
+            y[:, 3:7] = quat.normalize(y[:, 3:7])
+            self.Y.from_numpy(Y)
+
+    def _impulse(self, y, i, p, n, e, mu, gl, h) -> None:
+        m = self.model
+        q = y[i, 3:7]
+        r = p - y[i, 0:3]
+        inv_m = m.body_inv_mass[i]
+        Iinv = lambda v: quat.rotate(q, m.body_inv_inertia[i] * quat.rotate_inv(q, v))
+        v = y[i, 7:10] * inv_m
+        w = Iinv(y[i, 10:13])
+        vp = v + cross(w, r)
+        vn = float(np.dot(vp, n))
+        if vn >= 0.0:
+            return
+        if -vn <= 2.0 * gl * h:
+            e = 0.0  # resting: no bounce
+        k_n = inv_m + float(np.dot(n, cross(Iinv(cross(r, n)), r)))
+        j = -(1.0 + e) * vn / k_n
+        J = j * n
+        vt = vp - vn * n
+        vt_len = float(np.linalg.norm(vt))
+        if vt_len > 1e-12:
+            t = vt / vt_len
+            k_t = inv_m + float(np.dot(t, cross(Iinv(cross(r, t)), r)))
+            J = J - min(mu * j, vt_len / k_t) * t
+        y[i, 7:10] += J
+        y[i, 10:13] += cross(r, J)
+
+
+def _pad(a, n):
+    out = np.zeros((n,) + np.asarray(a).shape[1:])
+    out[: len(a)] = a
+    return out
+
+
+def _build(sys: BaraffSystem):
+    Y, Y0, inv_m, inv_i, g, err = sys.Y, sys.Y0, sys.inv_m, sys.inv_i, sys.g, sys.err
+    n, dtype = max(1, sys.model.count), ti.f64
+
+    @ti.func
+    def f(y, t, i):
+        q = ti.Vector([y[3], y[4], y[5], y[6]], dt=dtype)
+        q = q / q.norm()
+        u = ti.Vector([q[1], q[2], q[3]], dt=dtype)
+        L = ti.Vector([y[10], y[11], y[12]], dt=dtype)
+        # ω = R I⁻¹ Rᵀ L
+        tt = 2.0 * (-u).cross(L)
+        Lb = L + q[0] * tt + (-u).cross(tt)
+        wb = inv_i[i] * Lb
+        t2 = 2.0 * u.cross(wb)
+        w = wb + q[0] * t2 + u.cross(t2)
+        dq = 0.5 * ti.Vector([-w[0] * q[1] - w[1] * q[2] - w[2] * q[3],
+                              w[0] * q[0] + w[1] * q[3] - w[2] * q[2],
+                              -w[0] * q[3] + w[1] * q[0] + w[2] * q[1],
+                              w[0] * q[2] - w[1] * q[1] + w[2] * q[0]], dt=dtype)
+        v = inv_m[i] * ti.Vector([y[7], y[8], y[9]], dt=dtype)
+        F = ti.Vector([0.0, 0.0, 0.0], dt=dtype)
+        if inv_m[i] > 0.0:
+            F = g[None] / inv_m[i]
+        return ti.Vector([v[0], v[1], v[2], dq[0], dq[1], dq[2], dq[3], F[0], F[1], F[2], 0.0, 0.0, 0.0, 0.0],
+                         dt=dtype)
+
+    step = make_step(sys.method, f, N, dtype)
+    dstep = doubling_step(sys.method, f, N, dtype)
+
+    @ti.func
+    def normalised(y):
+        s = ti.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
+        for c in ti.static(range(3, 7)):
+            y[c] = y[c] / s
+        return y
+
+    @ti.kernel
+    def step_k(t: dtype, h: dtype):
+        for i in range(n):
+            Y[i] = normalised(step(Y[i], t, h, i))
+
+    @ti.kernel
+    def attempt_k(t: dtype, h: dtype, atol: dtype, rtol: dtype) -> dtype:
+        err[None] = 0.0
+        for i in range(n):
+            y0 = Y[i]
+            Y0[i] = y0
+            y2, est = dstep(y0, t, h, i)
+            ti.atomic_max(err[None], scaled_error(y0, y2, est, atol, rtol))  # max: any order
+            Y[i] = normalised(y2)
+        return err[None]
+
+    @ti.kernel
+    def rollback_k():
+        for i in range(n):
+            Y[i] = Y0[i]
+
+    return dict(step=step_k, attempt=attempt_k, rollback=rollback_k)

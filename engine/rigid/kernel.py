@@ -1,0 +1,349 @@
+"""The XPBD substep as one Taichi kernel on float64 fields (Müller et al. 2020; see :mod:`.xpbd`).
+Contacts and joints are solved Gauss–Seidel in their fixed order by serial loops, so the result
+cannot depend on threads (no atomics at all); the per-body stages run in parallel (each body
+writes only its own row). Four launches per substep: fused into one kernel (or one per step)
+the same code took LLVM about a minute to compile, split it takes about a second."""
+
+import taichi as ti
+
+f64 = ti.f64
+vec3 = ti.types.vector(3, f64)
+vec4 = ti.types.vector(4, f64)
+
+BALL, HINGE, FIXED, DISTANCE = 0, 1, 2, 3
+JOINT_CODES = {"ball": BALL, "hinge": HINGE, "fixed": FIXED, "distance": DISTANCE}
+
+
+@ti.func
+def qmul(a, b):
+    return vec4(a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+                a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+                a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+                a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0])
+
+
+@ti.func
+def qconj(q: ti.template()):
+    return vec4(q[0], -q[1], -q[2], -q[3])
+
+
+@ti.func
+def qrot(q: ti.template(), v: ti.template()):
+    u = vec3(q[1], q[2], q[3])
+    t = 2.0 * u.cross(v)
+    return v + q[0] * t + u.cross(t)
+
+
+@ti.func
+def qrot_inv(q: ti.template(), v: ti.template()):
+    return qrot(qconj(q), v)
+
+
+@ti.func
+def add_rot(q: ti.template(), r):
+    dq = qmul(vec4(0.0, r[0], r[1], r[2]), q)
+    out = q + 0.5 * dq
+    return out / out.norm()
+
+
+@ti.func
+def rot_between(q: ti.template(), qp):
+    d = qmul(q, qconj(qp))
+    s = ti.cast(2.0, f64)
+    if d[0] < 0.0:
+        s = ti.cast(-2.0, f64)
+    return s * vec3(d[1], d[2], d[3])
+
+
+class Fields:
+    """The float64 fields one rigid system steps (Taichi fields: a launch with NumPy arrays as
+    arguments cost ~20 µs per array here, a launch of a kernel on fields ~20 µs in all).
+    Bodies: ``x q v w`` and the substep's start ``xp qp``, ``inv_m inv_i`` (zero for bodies that do
+    not move now), ``inertia``, ``moving``, ``kin`` with path positions ``kx0 kx1``. Contacts
+    (``capacity`` rows): ``ca cb cn cra crb rnd_a rnd_b mu e lam vn0``. Joints: ``jt ja jb jra jrb
+    jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha``. ``substep(h, g, |g|, frac, nc, nj)``: one
+    substep, a single launch."""
+
+    def __init__(self, nb: int, capacity: int, nj: int):
+        nb, nj = max(1, nb), max(1, nj)
+        self.nb, self.capacity, self.nj = nb, capacity, nj
+        for k in "x v w xp kx0 kx1 inv_i inertia".split():
+            setattr(self, k, ti.Vector.field(3, f64, nb))
+        for k in "q qp".split():
+            setattr(self, k, ti.Vector.field(4, f64, nb))
+        self.inv_m = ti.field(f64, nb)
+        self.moving, self.kin = ti.field(ti.i32, nb), ti.field(ti.i32, nb)
+        for k in "cn cra crb".split():
+            setattr(self, k, ti.Vector.field(3, f64, capacity))
+        for k in "rnd_a rnd_b mu e lam vn0".split():
+            setattr(self, k, ti.field(f64, capacity))
+        self.ca, self.cb = ti.field(ti.i32, capacity), ti.field(ti.i32, capacity)
+        for k in "jra jrb jaxa jaxb jpa jpb".split():
+            setattr(self, k, ti.Vector.field(3, f64, nj))
+        self.jqrel = ti.Vector.field(4, f64, nj)
+        for k in "jlo jhi jalpha".split():
+            setattr(self, k, ti.field(f64, nj))
+        for k in "jt ja jb jlim".split():
+            setattr(self, k, ti.field(ti.i32, nj))
+        self.substep = _build(self)
+
+
+def _build(F):
+    x, q, v, w, xp, qp = F.x, F.q, F.v, F.w, F.xp, F.qp
+    inv_m, inv_i, inertia, moving, kin, kx0, kx1 = F.inv_m, F.inv_i, F.inertia, F.moving, F.kin, F.kx0, F.kx1
+    ca, cb, cn, cra, crb, rnd_a, rnd_b = F.ca, F.cb, F.cn, F.cra, F.crb, F.rnd_a, F.rnd_b
+    mu, e, lam, vn0 = F.mu, F.e, F.lam, F.vn0
+    J = (F.jt, F.ja, F.jb, F.jra, F.jrb, F.jaxa, F.jaxb, F.jpa, F.jpb, F.jqrel, F.jlo, F.jhi, F.jlim, F.jalpha)
+    nb = F.nb
+
+    @ti.kernel
+    def begin(h: f64, g: vec3, frac: f64, nc: ti.i32):
+        # ṽ_n of every contact before the substep (restitution)
+        for k in range(nc):
+            a, b = ca[k], cb[k]
+            n = cn[k]
+            vn0[k] = rel_vel(v, w, a, b, arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)).dot(n)
+        # integrate: v += hg, x += hv, ω with the gyroscopic term, q += ½h[ω, 0]q
+        for i in range(nb):
+            xp[i] = x[i]
+            qp[i] = q[i]
+            if moving[i] != 0:
+                v[i] += h * g
+                x[i] += h * v[i]
+                wb = qrot_inv(q[i], w[i])
+                I = inertia[i]
+                wb += h * (-wb.cross(I * wb)) / I
+                w[i] = qrot(q[i], wb)
+                q[i] = add_rot(q[i], h * w[i])
+            elif kin[i] != 0:
+                x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac
+
+    @ti.kernel
+    def joints(h: f64, nj: ti.i32):
+        ti.loop_config(serialize=True)
+        for j in range(nj):
+            solve_joint(j, h, x, q, inv_m, inv_i, *J)
+
+    @ti.kernel
+    def contacts(nc: ti.i32):
+        # the position pass over the contacts, in order: depth, then static friction
+        ti.loop_config(serialize=True)
+        for k in range(nc):
+            a, b = ca[k], cb[k]
+            n = cn[k]
+            lam[k] = 0.0
+            ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
+            d = (point_b(x, crb, b, k, rb) - x[a] - ra).dot(n)
+            if d > 0.0:
+                lam[k] = positional(x, q, inv_m, inv_i, a, b, ra, rb, d * n, 0.0)
+        # static friction once every depth is resolved (λ_n final): undo the contact points'
+        # tangential slip over the substep where it takes less than μ λ_n
+        ti.loop_config(serialize=True)
+        for k in range(nc):
+            if lam[k] > 0.0:
+                a, b = ca[k], cb[k]
+                n = cn[k]
+                ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
+                dp = x[a] + ra - xp[a] - qrot(qp[a], qrot_inv(q[a], ra))
+                if b >= 0:
+                    dp -= x[b] + rb - xp[b] - qrot(qp[b], qrot_inv(q[b], rb))
+                dpt = dp - dp.dot(n) * n
+                slip = dpt.norm()
+                if slip > 1e-12:
+                    t = -dpt / slip
+                    wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
+                    if wt > 0.0:
+                        dlt = slip / wt
+                        if dlt < mu[k] * lam[k]:
+                            apply_pos(x, q, inv_m, inv_i, a, ra, dlt * t, 1.0)
+                            apply_pos(x, q, inv_m, inv_i, b, rb, dlt * t, -1.0)
+
+    @ti.kernel
+    def velocities(h: f64, glen: f64, nc: ti.i32):
+        # v = Δx/h, ω = 2 vec(Δq q⁻¹)/h
+        for i in range(nb):
+            if moving[i] != 0 or kin[i] != 0:
+                v[i] = (x[i] - xp[i]) / h
+            if moving[i] != 0:
+                w[i] = rot_between(q[i], qp[i]) / h
+        # velocity pass, in order: dynamic friction (at most μλ_n/h of impulse), restitution
+        ti.loop_config(serialize=True)
+        for k in range(nc):
+            if lam[k] > 0.0:
+                a, b = ca[k], cb[k]
+                n = cn[k]
+                ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
+                vr = rel_vel(v, w, a, b, ra, rb)
+                vn = vr.dot(n)
+                vt = vr - vn * n
+                vt_len = vt.norm()
+                dv = vec3(0.0, 0.0, 0.0)
+                if vt_len > 1e-14:
+                    t = -vt / vt_len
+                    wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
+                    dv += t * ti.min(mu[k] * lam[k] * wt / h, vt_len)
+                ee = e[k]
+                if ti.abs(vn0[k]) <= 2.0 * glen * h:
+                    ee = ti.cast(0.0, f64)
+                dv += n * (-vn + ti.max(-ee * vn0[k], 0.0))
+                mag = dv.norm()
+                if mag > 1e-14:
+                    dn = dv / mag
+                    wd = gen_w(q, inv_m, inv_i, a, ra, dn) + gen_w(q, inv_m, inv_i, b, rb, dn)
+                    if wd > 0.0:
+                        p = dv / wd
+                        apply_vel(v, w, q, inv_m, inv_i, a, ra, p, 1.0)
+                        apply_vel(v, w, q, inv_m, inv_i, b, rb, p, -1.0)
+
+    def substep(h, g, glen, frac, nc, nj):
+        """One substep; with h = 0 it only compiles every kernel (a build pays the compile, not
+        the frame where the first contact or joint appears)."""
+        if h == 0.0:
+            begin(1.0, g, frac, 0)
+            joints(1.0, 0)
+            contacts(0)
+            velocities(1.0, glen, 0)
+            return
+        begin(h, g, frac, nc)
+        if nj:
+            joints(h, nj)
+        if nc:
+            contacts(nc)
+        velocities(h, glen, nc)
+
+    return substep
+
+
+@ti.func
+def arm_a(q: ti.template(), cra: ti.template(), rnd_a: ti.template(), a, k, n):
+    r = -rnd_a[k] * n
+    if rnd_a[k] <= 0.0:
+        r = qrot(q[a], cra[k])
+    return r
+
+
+@ti.func
+def arm_b(q: ti.template(), crb: ti.template(), rnd_b: ti.template(), b, k, n):
+    r = vec3(0.0, 0.0, 0.0)
+    if b >= 0:
+        if rnd_b[k] > 0.0:
+            r = rnd_b[k] * n
+        else:
+            r = qrot(q[b], crb[k])
+    return r
+
+
+@ti.func
+def point_b(x: ti.template(), crb: ti.template(), b, k, rb):
+    p = crb[k]
+    if b >= 0:
+        p = x[b] + rb
+    return p
+
+
+@ti.func
+def rel_vel(v: ti.template(), w: ti.template(), a, b, ra, rb):
+    out = v[a] + w[a].cross(ra)
+    if b >= 0:
+        out -= v[b] + w[b].cross(rb)
+    return out
+
+
+@ti.func
+def iinv(q: ti.template(), inv_i: ti.template(), i, vv):
+    return qrot(q[i], inv_i[i] * qrot_inv(q[i], vv))
+
+
+@ti.func
+def gen_w(q: ti.template(), inv_m: ti.template(), inv_i: ti.template(), i, r, n):
+    out = ti.cast(0.0, f64)
+    if i >= 0:
+        rn = r.cross(n)
+        out = inv_m[i] + rn.dot(iinv(q, inv_i, i, rn))
+    return out
+
+
+@ti.func
+def apply_pos(x: ti.template(), q: ti.template(), inv_m: ti.template(), inv_i: ti.template(), i, r, p, sign):
+    if i >= 0:
+        x[i] += sign * p * inv_m[i]
+        dr = iinv(q, inv_i, i, r.cross(p))
+        if dr.norm_sqr() > 0.0:
+            q[i] = add_rot(q[i], sign * dr)
+
+
+@ti.func
+def apply_vel(v: ti.template(), w: ti.template(), q: ti.template(), inv_m: ti.template(), inv_i: ti.template(), i, r, p, sign):
+    if i >= 0:
+        v[i] += sign * p * inv_m[i]
+        w[i] += sign * iinv(q, inv_i, i, r.cross(p))
+
+
+@ti.func
+def positional(x: ti.template(), q: ti.template(), inv_m: ti.template(), inv_i: ti.template(), a, b, ra, rb, corr, alpha):
+    """Move a's point by ``corr`` relative to b's (compliance α̃ = alpha); returns Δλ."""
+    c = corr.norm()
+    dl = ti.cast(0.0, f64)
+    if c > 1e-15:
+        n = corr / c
+        wsum = gen_w(q, inv_m, inv_i, a, ra, n) + gen_w(q, inv_m, inv_i, b, rb, n)
+        if wsum + alpha > 0.0:
+            dl = c / (wsum + alpha)
+            apply_pos(x, q, inv_m, inv_i, a, ra, dl * n, 1.0)
+            apply_pos(x, q, inv_m, inv_i, b, rb, dl * n, -1.0)
+    return dl
+
+
+@ti.func
+def angular(q: ti.template(), inv_i: ti.template(), a, b, rot, alpha):
+    """Turn a by the rotation vector ``rot`` relative to b."""
+    th = rot.norm()
+    if th > 1e-15:
+        n = rot / th
+        wsum = n.dot(iinv(q, inv_i, a, n))
+        if b >= 0:
+            wsum += n.dot(iinv(q, inv_i, b, n))
+        if wsum + alpha > 0.0:
+            p = th / (wsum + alpha) * n
+            q[a] = add_rot(q[a], iinv(q, inv_i, a, p))
+            if b >= 0:
+                q[b] = add_rot(q[b], -iinv(q, inv_i, b, p))
+
+
+@ti.func
+def solve_joint(j, h, x: ti.template(), q: ti.template(), inv_m: ti.template(), inv_i: ti.template(), jt: ti.template(), ja: ti.template(), jb: ti.template(), jra: ti.template(), jrb: ti.template(), jaxa: ti.template(), jaxb: ti.template(), jpa: ti.template(), jpb: ti.template(), jqrel: ti.template(), jlo: ti.template(), jhi: ti.template(), jlim: ti.template(), jalpha: ti.template()):
+    a, b = ja[j], jb[j]
+    alpha = jalpha[j] / (h * h)
+    qb = vec4(1.0, 0.0, 0.0, 0.0)
+    if b >= 0:
+        qb = q[b]
+    if jt[j] == HINGE:
+        angular(q, inv_i, a, b, qrot(q[a], jaxa[j]).cross(qrot(qb, jaxb[j])), alpha)
+        if jlim[j] != 0:
+            if b >= 0:
+                qb = q[b]
+            nax = qrot(q[a], jaxa[j])
+            ua, ub = qrot(q[a], jpa[j]), qrot(qb, jpb[j])
+            phi = ti.atan2(ub.cross(ua).dot(nax), ub.dot(ua))
+            target = ti.min(ti.max(phi, jlo[j]), jhi[j])
+            if target != phi:
+                angular(q, inv_i, a, b, nax * (target - phi), alpha)
+    elif jt[j] == FIXED:
+        err = qmul(q[a], qconj(qmul(qb, jqrel[j])))
+        angular(q, inv_i, a, b, -rot_between(err, vec4(1.0, 0.0, 0.0, 0.0)), alpha)
+    ra = qrot(q[a], jra[j])
+    rb = vec3(0.0, 0.0, 0.0)
+    pb = jrb[j]
+    if b >= 0:
+        rb = qrot(q[b], jrb[j])
+        pb = x[b] + rb
+    delta = pb - (x[a] + ra)
+    corr = delta
+    if jt[j] == DISTANCE:
+        d = delta.norm()
+        corr = vec3(0.0, 0.0, 0.0)
+        if d > jhi[j]:
+            corr = delta / d * (d - jhi[j])
+        elif d < jlo[j] and d > 1e-12:
+            corr = delta / d * (d - jlo[j])
+    positional(x, q, inv_m, inv_i, a, b, ra, rb, corr, alpha)

@@ -1,0 +1,300 @@
+"""``RigidSystem``: the rigid bodies of a scene as one system (engine.system's protocol, kind
+"rigid": it advances before particles and soft bodies and publishes its shapes' poses for them).
+
+``[rigid] integrator = "xpbd"`` (default): steps of at most ``[rigid] h``; each finds its contacts
+once (:mod:`.collide`, with a speculative margin of the step's motion) and takes ``substeps`` XPBD
+substeps (:mod:`.xpbd`), joints included. Any of the five ODE integrators: Baraff's state on the
+ODE driver (:mod:`.baraff`). Bodies at rest (``[rigid] sleep``) sleep: below ``sleep_speed`` for
+``sleep_time`` they stop and hold still like fixed ones until a moving body touches them, an
+impulse or a pose is set.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..ode.driver import DriverStats, SimulationDiverged
+from ..paths import sample_path
+from ..system import SystemBase
+from . import collide, quat
+from .quat import cross
+from .joints import Joints
+from .model import RigidModel, RigidState
+from .shapes import BOX, mesh
+from .xpbd import ContactSet, XPBDSolver
+
+SLOP = 0.005  # m: contacts are kept this far apart before touching (and a step's motion more)
+
+
+class RigidSystem(SystemBase):
+    kind = "rigid"
+
+    def __init__(self, cfg, collider_specs, control, name: str = "rigid"):
+        """``cfg``: the scene config (its ``rigid_bodies``, ``joints``, ``rigid``);
+        ``collider_specs``: the scene's planes and spheres (static shapes for the bodies);
+        ``control``: the scene's inputs (gravity, collider positions)."""
+        self.name, self.cfg, self.settings = name, cfg, cfg.rigid
+        self.bodies_cfg = list(cfg.rigid_bodies)
+        self.model = RigidModel(self.bodies_cfg)
+        self.state = RigidState.from_config(self.bodies_cfg)
+        self.specs = list(collider_specs)
+        self.control = control
+        self.joints = Joints(cfg.joints, self.model, self.state) if cfg.joints else None
+        self.stats = DriverStats()
+        self.method = self.settings.integrator
+        self.label = f"{name}: {self.method}"
+        self.t = 0.0
+        self.last_contacts = None
+        self._meshes = [mesh(self.model.body_shape[i], self.model.body_radius[i], self.model.body_half[i],
+                             self.model.body_half_length[i]) for i in range(self.model.count)]
+        self._kin = np.flatnonzero(self.model.body_kinematic)
+        if self.method == "xpbd":
+            self.solver = XPBDSolver(self.model, self.state, self.joints)
+            self.ode = None
+        else:
+            from .baraff import BaraffSystem
+
+            self.solver = None
+            self.ode = BaraffSystem(self, cfg.solver)
+        self._rest = np.zeros(self.model.count)
+        self.pending = []  # impulses from the API: (body, impulse, point or None)
+
+    # -- the System protocol -------------------------------------------------------------------
+    def advance(self, t0: float, t1: float) -> None:
+        g = np.asarray(self.control.gravity[None].to_numpy(), np.float64)
+        self._take_pending()
+        if self.ode is not None:
+            self.ode.advance(t0, t1, g)
+        else:
+            n = max(1, math.ceil((t1 - t0) / self.settings.h - 1e-9))
+            h = (t1 - t0) / n
+            for k in range(n):
+                self._xpbd_step(t0 + k * h, h, g)
+        self.t = t1
+        if not (np.isfinite(self.state.x).all() and np.isfinite(self.state.q).all()):
+            raise SimulationDiverged(self.label, self.method, t1 - t0, t1, "non-finite state")
+
+    def reset(self) -> None:
+        self.state.__dict__.update(RigidState.from_config(self.bodies_cfg).__dict__)
+        if self.solver is not None:
+            self.solver.state = self.state
+            self.solver.awake[:] = True
+        if self.ode is not None:
+            self.ode.reset()
+        self._rest[:] = 0.0
+        self.t, self.pending, self.last_contacts = 0.0, [], None
+        self.stats.__dict__.update(DriverStats().__dict__)
+
+    def drawables(self) -> dict:
+        """Triangles of every body, moved to its pose: kind "mesh", ``positions`` a callable
+        (read at draw time), ``triangles`` (T, 3), ``color`` (V, 3)."""
+        offs = np.cumsum([0] + [len(v) for v, _ in self._meshes])
+        tris = np.concatenate([t + o for (_, t), o in zip(self._meshes, offs)]) if self._meshes else np.zeros((0, 3), np.int32)
+        cols = np.concatenate([np.tile(self.model.body_color[i], (len(v), 1)) for i, (v, _) in enumerate(self._meshes)]) \
+            if self._meshes else np.zeros((0, 3))
+        return dict(kind="mesh", positions=self.vertices, triangles=tris.astype(np.int32),
+                    lines=np.zeros((0, 2), np.int32), color=cols.astype(np.float32))
+
+    def vertices(self) -> np.ndarray:
+        """(V, 3) float32 world vertices of every body's mesh, in body order."""
+        if not self._meshes:
+            return np.zeros((0, 3), np.float32)
+        S = self.state
+        out = [S.x[i] + quat.rotate(np.broadcast_to(S.q[i], (len(v), 4)), v) for i, (v, _) in enumerate(self._meshes)]
+        return np.concatenate(out).astype(np.float32)
+
+    def energy(self) -> dict:
+        S, m = self.state, self.model
+        g = np.asarray(self.control.gravity[None].to_numpy(), np.float64)
+        wb = quat.rotate_inv(S.q, S.w)
+        dyn = m.dynamic
+        kin = 0.5 * float(np.sum(m.body_mass[dyn] * np.sum(S.v[dyn] ** 2, 1)))
+        rot = 0.5 * float(np.sum(m.body_inertia[dyn] * wb[dyn] ** 2))
+        pot = -float(np.sum(m.body_mass[dyn] * (S.x[dyn] @ g)))
+        return dict(t=self.t, kinetic=kin, rotational=rot, potential=pot, total=kin + rot + pot)
+
+    def contacts(self, names=()):
+        from ..contacts import Contacts
+
+        return Contacts.empty(names)
+
+    def publish(self, coupling) -> None:
+        """The bodies' shapes at the step's end, for particles and soft bodies (sphere, box and
+        capsule poses with their velocities)."""
+        coupling.put(self.name, "rigid_shapes", self.shapes())
+
+    def shapes(self) -> list:
+        S, m = self.state, self.model
+        out = []
+        for i in range(m.count):
+            out.append(dict(name=m.names[i], shape=int(m.body_shape[i]), position=S.x[i].copy(),
+                            orientation=S.q[i].copy(), velocity=S.v[i].copy(), angular_velocity=S.w[i].copy(),
+                            radius=float(m.body_radius[i]), half_extents=m.body_half[i].copy(),
+                            half_length=float(m.body_half_length[i]),
+                            restitution=float(m.body_restitution[i]), friction=float(m.body_friction[i])))
+        return out
+
+    # -- stepping --------------------------------------------------------------------------------
+    def _static_shapes(self, t):
+        pos = self.control.collider_positions(t) if self.specs else np.zeros((0, 3))
+        for k, s in enumerate(self.specs):
+            yield k, s, pos[k]
+
+    def find_contacts(self, t: float, h: float) -> ContactSet:
+        """The contacts for a step of h from t: against the scene's static shapes, then body
+        pairs from the broad phase, in a fixed order."""
+        S, m = self.state, self.model
+        awake = self.solver.awake if self.solver is not None else np.ones(m.count, bool)
+        moving = m.dynamic & awake
+        speed = np.linalg.norm(S.v, axis=1) + np.linalg.norm(S.w, axis=1) * m.body_bound
+        margins = SLOP + h * speed
+        R = quat.matrix(S.q)
+        rows, sources = [], []
+        live = np.flatnonzero(moving)
+        for k, spec, p in self._static_shapes(t):
+            if spec.kind == "plane":
+                nrm = np.asarray(spec.normal, np.float64)
+                found = collide.plane_contacts(m, S.x, R, p, nrm / np.linalg.norm(nrm), margins, live)
+            else:
+                found = collide.sphere_collider_contacts(m, S.x, R, p, float(spec.radius), margins, live)
+            for i, pa, pb, n in found:
+                rows.append((i, -1, pa, pb, n, float(spec.friction), float(spec.restitution)))
+                sources.append(spec.name or f"colliders[{k}]")
+        pairs = collide.broad_phase(S.x, m.body_bound, margins)
+        if len(pairs):
+            keep = moving[pairs[:, 0]] | moving[pairs[:, 1]]
+            if self.joints is not None:
+                keep &= np.array([not self._jointed(i, j) for i, j in pairs], bool)
+            pairs = pairs[keep]
+        boxes = (m.body_shape[pairs[:, 0]] == BOX) & (m.body_shape[pairs[:, 1]] == BOX) if len(pairs) else np.zeros(0, bool)
+        bb = pairs[boxes]
+        found = dict(zip(np.flatnonzero(boxes).tolist(), collide.box_box_batch(
+            S.x[bb[:, 0]], R[bb[:, 0]], m.body_half[bb[:, 0]], S.x[bb[:, 1]], R[bb[:, 1]], m.body_half[bb[:, 1]],
+            margins[bb[:, 0]] + margins[bb[:, 1]])))
+        for k, (i, j) in enumerate(pairs):
+            if k in found:
+                got = found[k]
+            else:
+                gi = (m.body_radius[i], m.body_half[i], m.body_half_length[i])
+                gj = (m.body_radius[j], m.body_half[j], m.body_half_length[j])
+                got = collide.pair(m.body_shape[i], m.body_shape[j], S.x[i], R[i], S.x[j], R[j], gi, gj,
+                                   margins[i] + margins[j])
+            for pa, pb, n in got:
+                rows.append((i, j, pa, pb, n, float(m.body_friction[j]), float(m.body_restitution[j])))
+                sources.append(m.names[j])
+        self._wake(rows, moving)
+        return ContactSet(m, S, rows, sources)
+
+    def _jointed(self, i, j) -> bool:
+        if not hasattr(self, "_joint_pairs"):
+            self._joint_pairs = {(min(r["a"], r["b"]), max(r["a"], r["b"])) for r in self.joints.rows}
+        return (int(i), int(j)) in self._joint_pairs
+
+    def _wake(self, rows, moving) -> None:
+        """An asleep body touched by a moving one faster than the sleep speed wakes up."""
+        if self.solver is None or not rows:
+            return
+        aw, S, m = self.solver.awake, self.state, self.model
+        if aw[m.dynamic].all():
+            return
+        speed = np.linalg.norm(S.v, axis=1) + np.linalg.norm(S.w, axis=1) * m.body_bound
+        active = aw & m.dynamic & (speed > self.settings.sleep_speed)
+        for i, j, *_ in rows:
+            if j < 0:
+                continue
+            for p, q in ((i, j), (j, i)):
+                if not aw[p] and m.dynamic[p] and active[q]:
+                    aw[p] = True
+                    self._rest[p] = 0.0
+
+    def _kinematic(self, t0, t1):
+        """(positions at t0, at t1) of every body, path-following ones from their paths."""
+        if not len(self._kin):
+            return None
+        x0, x1 = self.state.x.copy(), self.state.x.copy()
+        for i in self._kin:
+            x0[i] = sample_path(self.model.paths[i], t0, self.bodies_cfg[i].position)
+            x1[i] = sample_path(self.model.paths[i], t1, self.bodies_cfg[i].position)
+        return x0, x1
+
+    def _xpbd_step(self, t: float, h: float, g) -> None:
+        C = self.find_contacts(t, h)
+        self.last_contacts = C
+        n = self.settings.substeps
+        hs = h / n
+        self.solver.step(h, n, g, C, self._kinematic(t, t + h))
+        self.stats.steps += n
+        self.stats.h_min, self.stats.h_max = min(self.stats.h_min, hs), max(self.stats.h_max, hs)
+        if self.settings.sleep:
+            self._sleep(h)
+
+    def _sleep(self, h: float) -> None:
+        S, m, aw = self.state, self.model, self.solver.awake
+        speed = np.linalg.norm(S.v, axis=1) + np.linalg.norm(S.w, axis=1) * m.body_bound
+        slow = m.dynamic & aw & (speed < self.settings.sleep_speed)
+        self._rest = np.where(slow, self._rest + h, 0.0)
+        down = slow & (self._rest >= self.settings.sleep_time)
+        if down.any():
+            aw[down] = False
+            S.v[down] = 0.0
+            S.w[down] = 0.0
+
+    def wake(self, i: int) -> None:
+        if self.solver is not None:
+            self.solver.awake[i] = True
+        self._rest[i] = 0.0
+
+    # -- driving from code (engine.api) ------------------------------------------------------------
+    def carry_from(self, old: "RigidSystem") -> None:
+        """Take the state of the bodies ``old`` has by the same name (a rebuild between frames)."""
+        names = {n: i for i, n in enumerate(old.model.names) if n}
+        for i, n in enumerate(self.model.names):
+            j = names.get(n)
+            if j is not None:
+                for k in "xqvw":
+                    getattr(self.state, k)[i] = getattr(old.state, k)[j]
+        self.t = old.t
+        if self.ode is not None:
+            self.ode.load()
+
+    def _take_pending(self) -> None:
+        for i, J, point in self.pending:
+            self.apply_impulse_now(i, J, point)
+        self.pending = []
+
+    def apply_impulse_now(self, i: int, J, point=None) -> None:
+        m, S = self.model, self.state
+        if not m.dynamic[i]:
+            return
+        J = np.asarray(J, np.float64)
+        S.v[i] += J * m.body_inv_mass[i]
+        if point is not None:
+            r = np.asarray(point, np.float64) - S.x[i]
+            S.w[i] += m.inv_inertia_world(S.q[i], i, cross(r, J))
+        self.wake(i)
+        if self.ode is not None:
+            self.ode.load()
+
+    def set_pose(self, i: int, position=None, orientation=None) -> None:
+        if position is not None:
+            self.state.x[i] = position
+        if orientation is not None:
+            self.state.q[i] = quat.normalize(np.asarray(orientation, np.float64))
+        self.wake(i)
+        if self.ode is not None:
+            self.ode.load()
+
+    def set_velocity(self, i: int, velocity=None, angular_velocity=None) -> None:
+        if velocity is not None:
+            self.state.v[i] = velocity
+        if angular_velocity is not None:
+            self.state.w[i] = angular_velocity
+        self.wake(i)
+        if self.ode is not None:
+            self.ode.load()
+
+    def body_state(self, i: int) -> dict:
+        S = self.state
+        return dict(position=S.x[i].copy(), orientation=S.q[i].copy(), velocity=S.v[i].copy(),
+                    angular_velocity=S.w[i].copy())

@@ -1,0 +1,137 @@
+"""XPBD for rigid bodies (Müller, Macklin, Chentanez, Jeschke, Kim 2020, "Detailed Rigid Body
+Simulation with Extended Position Based Dynamics"), substep by substep:
+
+1. integrate: v += h g; x += h v; ω += h I⁻¹(−ω × Iω) (body frame); q += ½h[ω, 0]q, normalised;
+2. position solve: joints (in config order), then contacts colour by colour: d = (p_b − p_a)·n,
+   Δλ = d / (w_a + w_b) with w = 1/m + (r × n)ᵀ I⁻¹ (r × n); static friction undoes the contact
+   points' tangential slip when its Δλ_t < μ λ_n;
+3. v = Δx/h, ω = 2 vec(Δq q⁻¹)/h;
+4. velocity solve: dynamic friction (a tangential impulse of at most μ λ_n / h) and restitution
+   (v_n ← −e ṽ_n, the normal velocity before the substep; e = 0 when |ṽ_n| ≤ 2|g|h).
+
+Determinism: contacts are kept in a fixed order (the static shapes', then sorted body pairs) and
+solved Gauss–Seidel in that order by one serial kernel per step (:mod:`.kernel`): no sum depends
+on a thread's timing, so 1 and 2 threads give the same bytes.
+Friction combines the two materials' μ by their average (two μ = 0.5 slide as μ = 0.5),
+restitution by the larger e.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import kernel, quat
+from .shapes import SPHERE
+
+
+class ContactSet:
+    """The contacts of one rigid step, fixed over its substeps, in a fixed order: ``a``, ``b``
+    (−1: the world), normal ``n`` (from b to a), anchors in the body frames (``ra``; ``rb``, a
+    world point when b = −1), ``round_a``/``round_b`` (a sphere's radius: its anchor is re-aimed
+    along ∓n each substep, so a rolling ball keeps touching at its lowest point), ``mu``
+    (average of the two), ``e`` (the larger), ``lam`` (the last substep's normal multipliers),
+    ``vn0`` (pre-substep normal speed) and ``source`` (what b is: a body's or a collider's name)."""
+
+    def __init__(self, model, state, rows, sources):
+        K = len(rows)
+        self.count = K
+        a = np.array([r[0] for r in rows], np.int32)
+        b = np.array([r[1] for r in rows], np.int32)
+        pa = np.array([r[2] for r in rows], np.float64).reshape(K, 3)
+        pb = np.array([r[3] for r in rows], np.float64).reshape(K, 3)
+        self.n = np.array([r[4] for r in rows], np.float64).reshape(K, 3)
+        mu_b = np.array([r[5] for r in rows], np.float64)
+        e_b = np.array([r[6] for r in rows], np.float64)
+        self.a, self.b = a, b
+        has_b = b >= 0
+        bb = np.where(has_b, b, 0)
+        self.ra = quat.rotate_inv(state.q[a], pa - state.x[a])
+        self.rb = np.where(has_b[:, None], quat.rotate_inv(state.q[bb], pb - state.x[bb]), pb)
+        self.round_a = np.where(model.body_shape[a] == SPHERE, model.body_radius[a], 0.0)
+        self.round_b = np.where(has_b & (model.body_shape[bb] == SPHERE), model.body_radius[bb], 0.0)
+        self.mu = 0.5 * (model.body_friction[a] + mu_b)
+        self.e = np.maximum(model.body_restitution[a], e_b)
+        self.lam = np.zeros(K)
+        self.vn0 = np.zeros(K)
+        self.source = sources
+        self.depth = np.einsum("ij,ij->i", pb - pa, self.n)
+
+    def arrays(self):
+        """What the kernel takes, in its order (at least one row: external arrays cannot be empty)."""
+        if self.count:
+            return (self.count, self.a, self.b, self.n, self.ra, self.rb, self.round_a, self.round_b, self.mu,
+                    self.e, self.lam, self.vn0)
+        z3, z1, zi = np.zeros((1, 3)), np.zeros(1), np.zeros(1, np.int32)
+        return (0, zi, zi, z3, z3, z3, z1, z1, z1, z1, np.zeros(1), np.zeros(1))
+
+
+class XPBDSolver:
+    """Steps a :class:`~engine.rigid.model.RigidState` (NumPy, float64) by substeps on float64
+    fields (:class:`~engine.rigid.kernel.Fields`: copied in and out once per step).
+    ``joints``: a :class:`~engine.rigid.joints.Joints`. ``awake``: bodies asleep hold still like
+    fixed ones (no integration, zero inverse mass)."""
+
+    def __init__(self, model, state, joints=None, capacity: int = 0):
+        self.model, self.state, self.joints = model, state, joints
+        self.awake = np.ones(model.count, bool)
+        self.nj = len(joints) if joints is not None else 0
+        self.F = None
+        # room for a box's 8-point manifolds with its neighbours: growing recompiles the kernels
+        self._capacity = max(1024, capacity, 24 * model.count)
+
+    def _fields(self, nc: int):
+        if self.F is None or nc > self.F.capacity:
+            cap = self._capacity
+            while cap < nc:
+                cap *= 2
+            self._capacity = cap
+            m = self.model
+            self.F = F = kernel.Fields(m.count, cap, self.nj)
+            F.inertia.from_numpy(_pad(m.body_inertia, F.nb))
+            F.kin.from_numpy(_pad(m.body_kinematic.astype(np.int32), F.nb))
+            if self.nj:
+                names = "jt ja jb jra jrb jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha".split()
+                for k, arr in zip(names, self.joints.arrays()[1:]):
+                    getattr(F, k).from_numpy(arr)
+            F.substep(0.0, [0.0, 0.0, 0.0], 0.0, 0.0, 0, 0)  # compile now
+        return self.F
+
+    def step(self, h: float, substeps: int, g, C: ContactSet, kinematic=None) -> None:
+        """``substeps`` substeps of h/substeps under gravity g with the step's contacts C.
+        ``kinematic``: (positions at the step's start, at its end) of path-following bodies."""
+        m, S = self.model, self.state
+        if m.count == 0:
+            return
+        F = self._fields(C.count)
+        nb = F.nb
+        mov = m.dynamic & self.awake
+        F.inv_m.from_numpy(_pad(m.body_inv_mass * mov, nb))
+        F.inv_i.from_numpy(_pad(m.body_inv_inertia * mov[:, None], nb))
+        F.moving.from_numpy(_pad(mov.astype(np.int32), nb))
+        for k in "xqvw":
+            getattr(F, k).from_numpy(_pad(getattr(S, k), nb))
+        if kinematic is not None:
+            F.kx0.from_numpy(_pad(kinematic[0], nb))
+            F.kx1.from_numpy(_pad(kinematic[1], nb))
+        nc = C.count
+        if nc:
+            for k, arr in (("ca", C.a), ("cb", C.b), ("cn", C.n), ("cra", C.ra), ("crb", C.rb),
+                           ("rnd_a", C.round_a), ("rnd_b", C.round_b), ("mu", C.mu), ("e", C.e)):
+                getattr(F, k).from_numpy(_pad(arr, F.capacity))
+        g = np.asarray(g, np.float64)
+        glen, hs = float(np.linalg.norm(g)), h / substeps
+        for s in range(substeps):
+            F.substep(hs, g.tolist(), glen, (s + 1.0) / substeps, nc, self.nj)
+        n = m.count
+        for k in "xqvw":
+            getattr(S, k)[:] = getattr(F, k).to_numpy()[:n]
+        if nc:
+            C.lam[:] = F.lam.to_numpy()[:nc]
+
+
+def _pad(a, n):
+    a = np.asarray(a)
+    if len(a) == n:
+        return np.ascontiguousarray(a)
+    out = np.zeros((n,) + a.shape[1:], a.dtype)
+    out[: len(a)] = a
+    return out

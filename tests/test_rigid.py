@@ -1,0 +1,235 @@
+"""Rigid bodies (issue 22) against the closed forms of ../shared/PHYSICS.md, on both paths (XPBD,
+Müller et al. 2020; Baraff's state on the ODE driver), and their bad input."""
+import hashlib
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.special import ellipk
+
+from engine.config import ConfigError, load_config
+from engine.rigid import quat
+from engine.scene import Scene
+
+G = 9.81
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+GROUND = {"type": "plane", "name": "ground", "restitution": 0.0, "friction": 0.5}
+
+
+def scene(bodies, joints=(), colliders=(GROUND,), fps=60, gravity=(0.0, -G, 0.0), **rigid):
+    cfg = load_config({"fps": fps, "forces": {"gravity": list(gravity)}, "colliders": list(colliders),
+                       "rigid_bodies": list(bodies), "joints": list(joints), "rigid": rigid,
+                       "solver": {"h": rigid.pop("solver_h", 1 / 120)} if "solver_h" in rigid else {}})
+    return Scene(cfg, render=False)
+
+
+def run(s, seconds, each=None):
+    n = round(seconds / s.frame_dt)
+    for _ in range(n):
+        s.advance_frame()
+        if each is not None:
+            each(s)
+
+
+def angular_momentum(s, i=0):
+    S, m = s.rigid.state, s.rigid.model
+    wb = quat.rotate_inv(S.q[i], S.w[i])
+    return quat.rotate(S.q[i], m.body_inertia[i] * wb), 0.5 * float(np.sum(m.body_inertia[i] * wb ** 2))
+
+
+TUMBLER = {"name": "t", "shape": "box", "half_extents": [0.05, 0.15, 0.3], "position": [0.0, 2.0, 0.0]}
+
+
+def test_torque_free_angular_momentum_kept_to_rounding_on_the_ode_path():
+    s = scene([dict(TUMBLER, angular_velocity=[0.3, 4.0, 0.2])], colliders=(), gravity=(0, 0, 0),
+              integrator="rk4", solver_h=1 / 240)
+    L0, E0 = angular_momentum(s)
+    run(s, 3.0)
+    L1, E1 = angular_momentum(s)
+    assert np.abs(L1 - L0).max() <= 1e-12 * np.linalg.norm(L0)  # L' = τ = 0 exactly
+    assert abs(E1 - E0) <= 1e-6 * E0  # RK4 at h = 1/240: the energy to the method's order
+
+
+def test_intermediate_axis_flip_period_matches_landau_lifshitz():
+    """ω₂ (the intermediate axis) changes sign every 2K(m)/λ (PHYSICS.md)."""
+    s = scene([dict(TUMBLER, angular_velocity=[0.05, 3.0, 0.05])], colliders=(), gravity=(0, 0, 0),
+              integrator="rk4", solver_h=1 / 480, fps=240)
+    I = s.rigid.model.body_inertia[0]
+    order = np.argsort(I)  # I1 < I2 < I3
+    L, E = angular_momentum(s)
+    L2 = float(L @ L)
+    I1, I2, I3 = I[order]
+    if L2 < 2 * E * I2:  # PHYSICS.md: swap the roles of I1 and I3
+        I1, I3 = I3, I1
+    lam = math.sqrt((I3 - I2) * (L2 - 2 * E * I1) / (I1 * I2 * I3))
+    m = (I2 - I1) * (2 * E * I3 - L2) / ((I3 - I2) * (L2 - 2 * E * I1))
+    expected = 2 * ellipk(m) / lam
+    signs, times = [], []
+
+    def record(sc):
+        S = sc.rigid.state
+        w2 = quat.rotate_inv(S.q[0], S.w[0])[order[1]]
+        signs.append(np.sign(w2))
+        times.append(sc.t)
+
+    run(s, 2.5 * expected + 1.0, record)
+    flips = [times[k] for k in range(1, len(signs)) if signs[k] != signs[k - 1]]
+    assert len(flips) >= 2
+    period = np.diff(flips).mean()
+    assert abs(period - expected) <= 0.01 * expected, (period, expected)
+
+
+def test_box_slides_to_the_coulomb_stop_distance():
+    """v0²/(2μg) with μ = 0.5 on both surfaces (combined by average: 0.5, not their product)."""
+    v0, mu = 3.0, 0.5
+    s = scene([{"name": "b", "shape": "box", "half_extents": [0.2, 0.2, 0.2], "position": [0.0, 0.2, 0.0],
+                "velocity": [v0, 0.0, 0.0], "friction": mu, "restitution": 0.0}], sleep=False)
+    run(s, 1.5)
+    d = s.rigid.state.x[0, 0]
+    expected = v0 ** 2 / (2 * mu * G)
+    assert abs(d - expected) <= 0.08 * expected, (d, expected)  # measured: 6 % short (0.86 m of 0.917)
+
+
+def test_bounce_apex_heights_fall_as_e_squared():
+    e, h0, r = 0.7, 1.0, 0.1
+    s = scene([{"name": "s", "shape": "sphere", "radius": r, "position": [0.0, h0 + r, 0.0], "restitution": e}],
+              colliders=(dict(GROUND, restitution=e),), fps=240, sleep=False)
+    ys, vs = [], []
+    run(s, 2.2, lambda sc: (ys.append(sc.rigid.state.x[0, 1] - r), vs.append(sc.rigid.state.v[0, 1])))
+    apex = [ys[k] for k in range(1, len(vs)) if vs[k - 1] > 0 >= vs[k]]
+    assert len(apex) >= 2
+    for n, hn in enumerate(apex[:2], start=1):
+        assert abs(hn - e ** (2 * n) * h0) <= 0.06 * e ** (2 * n) * h0, (n, hn, e ** (2 * n) * h0)
+
+
+def test_rod_pendulum_period_on_a_hinge():
+    """T = 4√(I_p/(mgd)) K(sin²(θ0/2)) for a thin rod hinged at its end (PHYSICS.md)."""
+    L, th0 = 1.0, math.radians(30)
+    top = np.array([0.0, 2.0, 0.0])
+    c = top + 0.5 * L * np.array([math.sin(th0), -math.cos(th0), 0.0])
+    q = quat.from_axis_angle([0, 0, 1], th0)
+    s = scene([{"name": "rod", "shape": "box", "half_extents": [0.01, L / 2, 0.01], "position": c.tolist(),
+                "orientation": q.tolist()}],
+              joints=[{"type": "hinge", "bodies": ["rod", "world"], "anchor": top.tolist(), "axis": [0, 0, 1]}],
+              colliders=(), fps=240, sleep=False)
+    m = s.rigid.model
+    Ip = m.body_inertia[0][2] + m.body_mass[0] * (L / 2) ** 2
+    expected = 4 * math.sqrt(Ip / (m.body_mass[0] * G * L / 2)) * ellipk(math.sin(th0 / 2) ** 2)
+    xs, ts = [], []
+    run(s, 2.5 * expected, lambda sc: (xs.append(sc.rigid.state.x[0, 0]), ts.append(sc.t)))
+    cross = [ts[k] for k in range(1, len(xs)) if xs[k - 1] > 0 >= xs[k]]
+    period = np.diff(cross).mean()
+    assert abs(period - expected) <= 0.01 * expected, (period, expected)
+
+
+def test_hinge_limit_is_held():
+    s = scene([{"name": "door", "shape": "box", "half_extents": [0.5, 1.0, 0.04], "mass": 15.0,
+                "position": [0.5, 1.5, 0.0], "angular_velocity": [0.0, 6.0, 0.0]}],
+              joints=[{"type": "hinge", "bodies": ["door", "world"], "anchor": [0.0, 1.5, 0.0], "axis": [0, 1, 0],
+                       "limits": [-30.0, 30.0]}], colliders=(), sleep=False)
+    worst = []
+    run(s, 1.5, lambda sc: worst.append(abs(sc.rigid.joints.hinge_angle(sc.rigid.state, 0))))
+    assert math.degrees(max(worst)) <= 31.0
+    assert math.degrees(max(worst)) >= 29.0  # it reached the limit
+
+
+def test_a_stack_of_boxes_stands_still():
+    boxes = [{"name": f"b{k}", "shape": "box", "half_extents": [0.25, 0.25, 0.25],
+              "position": [0.0, 0.25 + 0.5 * k, 0.0], "friction": 0.6} for k in range(5)]
+    s = scene(boxes)
+    x0 = s.rigid.state.x.copy()
+    run(s, 3.0)
+    assert np.abs(s.rigid.state.x - x0).max() < 0.01  # measured: 1.3 mm, then asleep
+    assert not s.rigid.solver.awake.any()  # asleep: no jitter left
+
+
+@pytest.mark.parametrize("top, bottom", [
+    (1.0, 0.001),
+    pytest.param(0.001, 1.0, marks=pytest.mark.xfail(
+        reason="1 kg hanging from 1 g: one Gauss-Seidel pass per substep moves the light link, not "
+               "the heavy body (the gap grows to ~1.5 m in 2 s); needs more joint iterations or shock "
+               "propagation", strict=True)),
+])
+def test_mass_ratio_1000_chain_holds(top, bottom):
+    """A 1 g body hanging from a 1 kg one on ball joints: the joints hold (the issue's case)."""
+    bodies = [{"name": "a", "shape": "sphere", "radius": 0.05, "mass": top, "position": [0.0, 2.0, 0.0]},
+              {"name": "b", "shape": "sphere", "radius": 0.05, "mass": bottom, "position": [0.0, 1.7, 0.0],
+               "velocity": [1.0, 0.0, 0.0]}]
+    joints = [{"type": "ball", "bodies": ["a", "world"], "anchor": [0.0, 2.15, 0.0]},
+              {"type": "ball", "bodies": ["b", "a"], "anchor": [0.0, 1.85, 0.0]}]
+    s = scene(bodies, joints, colliders=(), sleep=False)
+    gaps = []
+    run(s, 2.0, lambda sc: gaps.append(max(sc.rigid.joints.gap(sc.rigid.state, k) for k in range(2))))
+    assert max(gaps) < 2e-3, max(gaps)
+
+
+def test_a_fast_small_body_does_not_tunnel():
+    s = scene([{"name": "bullet", "shape": "sphere", "radius": 0.01, "position": [0.0, 1.0, 0.0],
+                "velocity": [0.0, -200.0, 0.0]}])
+    run(s, 0.5)
+    assert s.rigid.state.x[0, 1] > 0.0
+
+
+def test_ode_path_ball_comes_to_rest_on_the_ground():
+    s = scene([{"name": "s", "shape": "sphere", "radius": 0.2, "position": [0.0, 1.0, 0.0], "restitution": 0.5}],
+              colliders=(dict(GROUND, restitution=0.5),), integrator="rk4", solver_h=1 / 240)
+    run(s, 3.0)
+    assert abs(s.rigid.state.x[0, 1] - 0.2) < 2e-3
+    assert abs(s.rigid.state.v[0, 1]) < 0.05
+
+
+THREADS = """
+import hashlib, sys
+from engine import runtime
+runtime.init("cpu", threads=int(sys.argv[1]))
+from engine.config import load_config
+from engine.scene import Scene
+s = Scene(load_config(sys.argv[2]), render=False)
+for _ in range(45):
+    s.advance_frame()
+S = s.rigid.state
+print(hashlib.sha256(S.x.tobytes() + S.q.tobytes() + S.v.tobytes() + S.w.tobytes()).hexdigest())
+"""
+
+
+def test_byte_identical_on_one_and_two_threads():
+    cfg = os.path.join(ROOT, "configs", "crates.toml")
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    out = [subprocess.run([sys.executable, "-c", THREADS, str(n), cfg], capture_output=True, text=True, env=env,
+                          timeout=600, cwd=ROOT) for n in (1, 2)]
+    for o in out:
+        assert o.returncode == 0, o.stderr[-2000:]
+    assert out[0].stdout.split()[-1] == out[1].stdout.split()[-1]
+
+
+@pytest.mark.parametrize("body, key", [
+    ({"shape": "box", "half_extents": [0.5, 0.0, 0.5]}, "rigid_bodies[0].half_extents[1]"),
+    ({"shape": "sphere", "radius": -1.0}, "rigid_bodies[0].radius"),
+    ({"shape": "sphere", "radius": 0.1, "orientation": [0.0, 0.0, 0.0, 0.0]}, "rigid_bodies[0].orientation"),
+    ({"shape": "sphere", "radius": 0.1, "orientation": [1.0, 1.0, 0.0, 0.0]}, "rigid_bodies[0].orientation"),
+    ({"shape": "sphere", "radius": 0.1, "fixed": True, "velocity": [1.0, 0.0, 0.0]}, "rigid_bodies[0].velocity"),
+    ({"shape": "box"}, "rigid_bodies[0].half_extents"),
+    ({"shape": "capsule", "radius": 0.1}, "rigid_bodies[0].half_length"),
+    ({"shape": "sphere", "radius": 0.1, "mass": 1.0, "density": 10.0}, "rigid_bodies[0].mass"),
+])
+def test_bad_bodies_are_one_line_naming_the_key(body, key):
+    with pytest.raises(ConfigError) as e:
+        load_config({"rigid_bodies": [dict(body, name="a")]})
+    assert len(e.value.problems) == 1 and e.value.problems[0].startswith(key), e.value.problems
+
+
+@pytest.mark.parametrize("joint, rigid, key", [
+    ({"type": "ball", "bodies": ["a", "nobody"]}, {}, "joints[0].bodies"),
+    ({"type": "ball", "bodies": ["a", "a"]}, {}, "joints[0].bodies"),
+    ({"type": "hinge", "bodies": ["a", "world"], "limits": [30.0, -30.0]}, {}, "joints[0].limits"),
+    ({"type": "distance", "bodies": ["a", "world"], "limits": [2.0, 1.0]}, {}, "joints[0].limits"),
+    ({"type": "ball", "bodies": ["a", "world"]}, {"integrator": "rk4"}, "joints[0]"),
+])
+def test_bad_joints_are_one_line_naming_the_key(joint, rigid, key):
+    with pytest.raises(ConfigError) as e:
+        load_config({"rigid_bodies": [{"name": "a", "shape": "sphere", "radius": 0.1}], "joints": [joint],
+                     "rigid": rigid})
+    assert len(e.value.problems) == 1 and e.value.problems[0].startswith(key), e.value.problems
