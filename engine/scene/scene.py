@@ -40,11 +40,18 @@ def collider_specs(cfg_colliders):
     out = []
     for c in cfg_colliders:
         common = dict(restitution=c.restitution, friction=c.friction, kill=c.kill, name=c.name,
-                      path=[(k.time, k.position) for k in c.path], visible=c.visible)
+                      path=[(k.time, k.position) for k in c.path], visible=c.visible,
+                      angular_velocity=tuple(c.angular_velocity), rotates=c.rotates)
         if c.type == "plane":
             out.append(ColliderSpec("plane", point=c.point, normal=c.normal, **common))
-        else:
+        elif c.type == "sphere":
             out.append(ColliderSpec("sphere", point=c.center, radius=c.radius, **common))
+        elif c.type == "box":
+            out.append(ColliderSpec("box", point=c.center, half_extents=tuple(c.half_extents),
+                                    orientation=tuple(c.orientation), **common))
+        else:
+            out.append(ColliderSpec("capsule", point=c.center, radius=c.radius, half_length=c.half_length,
+                                    orientation=tuple(c.orientation), **common))
     return out
 
 
@@ -69,7 +76,11 @@ class Scene:
         self.frame_dt = 1.0 / cfg.fps
         self.stats = Stats()
         specs = collider_specs(cfg.colliders)
-        self.colliders = Colliders(specs)
+        same_colliders = previous is not None and previous.cfg.colliders == cfg.colliders
+        # the one shape table: particles read it, soft bodies through their thickness (a kept
+        # body's kernels were compiled against the previous scene's table, so an unchanged
+        # table is kept with them)
+        self.colliders = previous.colliders if same_colliders else Colliders(specs)
         if previous is None:
             self.control = Control.for_scene(cfg, specs)
         else:
@@ -83,7 +94,6 @@ class Scene:
         if cfg.bodies:
             from ..bodies import SoftBody
 
-            same_colliders = previous is not None and previous.cfg.colliders == cfg.colliders
             keep = {b.cfg.name: b for b in (previous.bodies if same_colliders else []) if b.cfg.name}
             for k, b in enumerate(cfg.bodies):
                 old = keep.get(b.name) if b.name else None
@@ -91,7 +101,7 @@ class Scene:
                     old.use_control(self.control)
                     self.bodies.append(old)
                 else:
-                    self.bodies.append(SoftBody(b, specs, self.control, cfg.solver.integrator, k, contacts))
+                    self.bodies.append(SoftBody(b, self.colliders, self.control, cfg.solver.integrator, k, contacts))
         self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies)
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None

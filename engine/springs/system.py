@@ -45,7 +45,7 @@ class SpringSystem:
                  xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 2,
                  check_stability: bool = True, dtype=ti.f32, record_energy: bool = False,
                  control: Control = None, name: str = "", contacts: int = 0):
-        """``control``: the scene's inputs (gravity, collider positions); without one the system
+        """``control``: the scene's inputs (gravity, collider poses); without one the system
         has its own, with ``gravity`` and the colliders' own paths. ``name`` prefixes messages.
         ``contacts``: keep up to this many node–collider contact records between drains
         (:meth:`contacts`; 0: none, and no recording is compiled)."""
@@ -86,7 +86,7 @@ class SpringSystem:
         if self._contacts.on:  # the start of each step, for locating impacts in it
             self._x0 = ti.Vector.field(3, dtype, max(1, n))
             self._v0 = ti.Vector.field(3, dtype, max(1, n))
-        self.contact_log = ContactBuffer(contacts if self._contacts.on else 0)
+        self.contact_log = ContactBuffer(contacts if self._contacts.on else 0, kind="node")
         self._bad = ti.field(ti.f64, ())
         self._bad[None] = constraints.NO_FAILURE
         self._limits = DistanceLimits(self.model, self.state) if max_stretch is not None else None
@@ -150,10 +150,8 @@ class SpringSystem:
             return
         if self._limits is not None:
             self._limits.apply(self.max_stretch, self.limit_iterations)
-        if self._contacts.on and self.control.colliders_move:
-            ctl = self.control
-            self.colliders.move_to(t_end, ctl.collider_positions(t_end),
-                                   since=(t_end - h, ctl.collider_positions(t_end - h)))
+        if self._contacts.on:  # the shared table placed at this step's end (engine.colliders)
+            self.colliders.follow(self.control, t_end - h, t_end)
         constraints.finalize(self.model, self.state, self._contacts, x0, v0, self._bad,
                              self._alpha(t_end), t_end, h, self.contact_log)
 

@@ -1,0 +1,10 @@
+"""Geometry shared by every kind of physics: shapes (plane, sphere, box, capsule) with their signed
+distance, closest point, outward normal and mass properties, and poses that translate and rotate.
+
+Imports no physics room (particles, springs, rigid): the shape table (:mod:`engine.colliders`)
+and the rigid bodies build on it."""
+from .shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, inertia, quat_from_rotvec, quat_mul, quat_normalize,
+                     quat_rotvec, quat_to_matrix, closest_point, signed_distance)
+
+__all__ = ["BOX", "CAPSULE", "KINDS", "PLANE", "SPHERE", "inertia", "quat_from_rotvec", "quat_mul",
+           "quat_normalize", "quat_rotvec", "quat_to_matrix", "closest_point", "signed_distance"]
