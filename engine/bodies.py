@@ -41,10 +41,13 @@ class SoftBody(SystemBase):
     thickness (a :class:`~engine.colliders.ColliderView`: an offset, not a copy) and what the
     renderer draws."""
 
-    def __init__(self, cfg, colliders, control, default_integrator, index: int = 0, contacts: int = 0):
+    def __init__(self, cfg, colliders, control, default_integrator, index: int = 0, contacts: int = 0,
+                 forces=None):
         """``colliders``: the scene's shape table (:class:`~engine.colliders.Colliders`; a list of
         :class:`~engine.colliders.ColliderSpec` builds one of its own). ``contacts``: node–shape
-        records kept between drains when the body's config asks (``contacts = true``)."""
+        records kept between drains when the body's config asks (``contacts = true``).
+        ``forces``: the scene's ``[forces]`` config (drag and wind reach the nodes; None: gravity
+        only)."""
         self.cfg, self.index = cfg, index
         self.name = cfg.name or f"soft_bodies[{index}]"
         self.topology = build_topology(cfg)
@@ -62,7 +65,10 @@ class SoftBody(SystemBase):
                                    integrator=integrator, substeps=cfg.substeps,
                                    xpbd_iterations=cfg.iterations, max_stretch=cfg.max_stretch,
                                    name=f"bodies[{index}] ({cfg.type})",
-                                   contacts=contacts if cfg.contacts else 0)
+                                   contacts=contacts if cfg.contacts else 0,
+                                   drag=forces.drag if forces is not None else 0.0,
+                                   attractors=forces.attractors if forces is not None else (),
+                                   vortices=forces.vortices if forces is not None else ())
         self.control = control
         self.pinned = np.array(self.topology.pinned, np.int64)
         self.pin_home = self.topology.positions[self.pinned].copy() if len(self.pinned) else None

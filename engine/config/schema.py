@@ -308,7 +308,7 @@ class Body(Strict):
     chain: ``segments`` + 1 nodes from ``position`` along ``direction`` over ``length``.
     hair: ``strands`` strands of ``segments`` from roots on a scalp cap (centre ``position``,
     ``radius``, ``cap_angle``) or a line (``position`` → ``line_end``). cloth: a
-    ``resolution = [nx, ny]`` grid of ``size = [w, d]`` in ``plane`` "xz" (flat) or "xy" (hanging)
+    ``resolution = [nx, ny]`` grid of ``size = [w, d]`` in ``plane`` "xz" (flat), "xy" or "zy" (hanging)
     from ``position``. jelly: a ``resolution = [nx, ny, nz]`` lattice of ``size = [x, y, z]``.
     Stiffness in N/m, damping in N·s/m, mass per node in kg."""
 
@@ -325,7 +325,7 @@ class Body(Strict):
     line_end: Vec3 = [1.0, 1.0, 0.0]
     resolution: Annotated[List[Annotated[int, Field(ge=2, le=512)]], Field(min_length=2, max_length=3)] = [16, 16]
     size: Annotated[List[Positive], Field(min_length=2, max_length=3)] = [1.0, 1.0]
-    plane: Literal["xz", "xy"] = "xz"
+    plane: Literal["xz", "xy", "zy"] = "xz"
     mass: Annotated[float, Field(gt=0, le=1e3)] = 0.01
     stiffness: Annotated[float, Field(gt=0, le=1e9)] = 1e3
     damping: NonNeg = 0.0

@@ -94,14 +94,18 @@ class Scene:
         if cfg.bodies:
             from ..bodies import SoftBody
 
-            keep = {b.cfg.name: b for b in (previous.bodies if same_colliders else []) if b.cfg.name}
+            f0, f1 = (previous.cfg.forces if previous is not None else None), cfg.forces
+            same_drag = f0 is not None and (f0.drag, f0.attractors, f0.vortices) == (f1.drag, f1.attractors,
+                                                                                 f1.vortices)  # compiled in
+            keep = {b.cfg.name: b for b in (previous.bodies if same_colliders and same_drag else []) if b.cfg.name}
             for k, b in enumerate(cfg.bodies):
                 old = keep.get(b.name) if b.name else None
                 if old is not None and old.cfg == b and old.index == k:  # kept, compiled kernels and all
                     old.use_control(self.control)
                     self.bodies.append(old)
                 else:
-                    self.bodies.append(SoftBody(b, self.colliders, self.control, cfg.solver.integrator, k, contacts))
+                    self.bodies.append(SoftBody(b, self.colliders, self.control, cfg.solver.integrator, k, contacts,
+                                               cfg.forces))
         self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies)
         self.camera = Camera(tuple(cfg.camera.position), tuple(cfg.camera.look_at), cfg.camera.fov)
         self.renderer = None
