@@ -205,6 +205,34 @@ def test_a_collider_built_without_rotation_cannot_be_spun(spheres):
         s.set_collider_pose("nope", [0.0, 0.0, 0.0])
 
 
+@pytest.mark.slow
+def test_nodes_landing_on_a_spinning_box_take_its_surface_velocity():
+    # a small cloth falls 0.25 m flat onto a box turning at ω about y (e = 0, μ = 1): every node
+    # meets the top face at t₁ = √(2·0.25/g) (located on the path, as for a still box), stops along
+    # the normal and, its slip ω·r < μ|v_n|, takes the surface point's velocity ω × r
+    from engine.colliders import ColliderSpec, Colliders
+    from engine.springs import SpringSystem, cloth
+
+    w = 2.0
+    col = Colliders([ColliderSpec("box", point=(0.0, 0.0, 0.0), half_extents=(1.0, 0.25, 1.0), restitution=0.0,
+                                  friction=1.0, angular_velocity=(0.0, w, 0.0))])
+    top = cloth(3, 3, size=(0.2, 0.2), origin=(0.05, 0.5, -0.1), mass=0.01, ks=1.0, kd=0.0)
+    sys = SpringSystem(top, colliders=col, integrator="rk4", gravity=(0.0, -G, 0.0), dtype=ti.f32, substeps=1,
+                       contacts=64)
+    t1 = math.sqrt(2 * 0.25 / G)
+    n = math.ceil(t1 * 60)
+    for _ in range(n):  # to the end of the step holding the impact
+        sys.step(1 / 60)
+    c = sys.contact_log.drain(col.names, ("sheet",), col.parties)
+    assert len(c) == 9 and set(c.a_kind) == {"node"} and set(c.a_name) == {"sheet"}
+    np.testing.assert_allclose(c.time, t1, atol=2e-5)
+    x, v = sys.positions().astype(np.float64), sys.velocities().astype(np.float64)
+    np.testing.assert_allclose(x[:, 1], 0.25, atol=1e-5)
+    spin = np.cross([0.0, w, 0.0], x)  # ω × r about the box's centre
+    np.testing.assert_allclose(v[:, [0, 2]], spin[:, [0, 2]], atol=2e-3)
+    assert np.abs(v[:, 1]).max() < 0.2  # at rest along the normal (gravity over the rest of the step)
+
+
 # -- boxes and capsules stop particles and nodes ----------------------------------------------------
 BOX = dict(center=[0.0, 0.5, 0.0], half_extents=[0.4, 0.2, 0.3], orientation=list(quat_from_rotvec([0, 0.4, 0.15])))
 CAPSULE = dict(center=[1.5, 0.4, 0.0], radius=0.2, half_length=0.5,
