@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from .colliders import Colliders
-from .paths import sample_path
+from .paths import Path, sample_path
 from .springs import SpringSystem, chain, cloth, hair, jelly, line_roots, scalp_roots
 from .springs.topology import STRUCTURAL
 from .system import SystemBase
@@ -50,6 +50,7 @@ class SoftBody(SystemBase):
         only)."""
         self.cfg, self.index = cfg, index
         self.name = cfg.name or f"soft_bodies[{index}]"
+        self._pin_path = Path((k.time, k.position) for k in cfg.pin_path or ())  # sampled each step
         self.topology = build_topology(cfg)
         n = self.topology.node_count
         bad = [p for p in (cfg.pins if isinstance(cfg.pins, list) else []) if p >= n]
@@ -95,6 +96,10 @@ class SoftBody(SystemBase):
     def energy(self) -> dict:
         return self.system.energy()
 
+    @property
+    def node_count(self) -> int:
+        return self.topology.node_count
+
     def contacts(self, names=(), shapes=()):
         """Node contacts since the last call (:class:`~engine.contacts.Contacts`; each row names
         this body and the shape); ``names``, ``shapes``: the shape table's (default: this body's
@@ -112,7 +117,7 @@ class SoftBody(SystemBase):
                 self.system.release(int(node))
             self.released = True
         if c.pin_path and not self.released and len(self.pinned):
-            offset = sample_path([(k.time, k.position) for k in c.pin_path], t0 + dt, (0, 0, 0)) \
+            offset = sample_path(self._pin_path, t0 + dt, (0, 0, 0)) \
                 - np.asarray(c.pin_path[0].position, np.float64)
             for node, home in zip(self.pinned, self.pin_home):
                 self.system.set_pin_target(int(node), home + offset)

@@ -78,37 +78,67 @@ def _vec(vals: ti.template(), r, c):
     return ti.Vector([vals[r, c], vals[r, c + 1], vals[r, c + 2]])
 
 
+@ti.func
+def _born(E: ti.template(), S: ti.template(), rows: ti.template(), vals: ti.template(), r, j, slot):
+    """Write particle j of plan row r into ``slot``: its serial, birth time and place depend on
+    (row, j) only, never on the slot it lands in."""
+    e, k = rows[r, R_E], rows[r, R_K]
+    ti.atomic_add(E.emitter_emitted[e], 1)
+    sid = E.emitter_serial[e] + rows[r, R_SERIAL] + j
+    # stratified birth times across the span, so a stream has no gaps or clumps
+    jitter = rand01(E.seed, e, sid, 10)
+    ts = vals[r, V_TS0] + vals[r, V_TSPAN] * (ti.cast(j, ti.f32) + jitter) / ti.cast(k, ti.f32)
+    t0, h = vals[r, V_T0], vals[r, V_H]
+    a = 0.0
+    if h > 0:
+        a = ti.min(1.0, ti.max(0.0, (ts - t0) / h))
+    pa, pb = _vec(vals, r, V_PA), _vec(vals, r, V_PB)
+    init_particle(E, S, slot, e, sid, pa + a * (pb - pa), _vec(vals, r, V_EV))
+    S.particle_age[slot] = -ti.max(0.0, ts - t0)  # born this long into the step
+
+
 @ti.kernel
 def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i32, ndim=2),
           vals: ti.types.ndarray(dtype=ti.f32, ndim=2), nrows: ti.i32, total: ti.i32,
-          adv: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+          adv: ti.types.ndarray(dtype=ti.i32, ndim=2), moved: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     """Write the ``total`` particles of the plan: row r spawns k of emitter e at ring offset
     head + R_HEAD with serials from serial + R_SERIAL, born at stratified times in
     [ts0, ts0 + tspan) and written at the emitter's position then, with age −(t_s − t0): the step
-    kernel advances them from their birth. A slot still alive is not overwritten: counted dropped.
-    Then every emitter's ring head, serial and dropped count advance by ``adv``."""
+    kernel advances them from their birth. A slot still alive is not overwritten: that birth is
+    marked in ``moved`` (one entry per particle of the plan) and, after every ring slot of the
+    launch is written, takes the first free slot of its emitter's segment in slot order (one
+    thread per emitter walks its marked births in plan order: deterministic, no atomics decide a
+    slot), so a burst of long-lived particles does not starve the stream while the segment has
+    room; only a birth that finds no free slot is counted dropped. Then every emitter's ring head,
+    serial and dropped count advance by ``adv``."""
     for q in range(total):
         r = 0
         while r + 1 < nrows and q >= rows[r + 1, R_FIRST]:
             r += 1
-        e, k, j = rows[r, R_E], rows[r, R_K], q - rows[r, R_FIRST]
+        e, j = rows[r, R_E], q - rows[r, R_FIRST]
         slot = rows[r, R_START] + (E.emitter_head[e] + rows[r, R_HEAD] + j) % rows[r, R_SIZE]
+        moved[q] = 0
         if S.particle_alive[slot] != 0:
-            ti.atomic_add(E.dropped[e], 1)  # the ring caught up with a live particle
+            moved[q] = 1  # the ring caught up with a live particle: placed below
+            ti.atomic_add(E.emitter_moved[e], 1)
         else:
-            ti.atomic_add(E.emitter_emitted[e], 1)
-            sid = E.emitter_serial[e] + rows[r, R_SERIAL] + j
-            # stratified birth times across the span, so a stream has no gaps or clumps
-            jitter = rand01(E.seed, e, sid, 10)
-            ts = vals[r, V_TS0] + vals[r, V_TSPAN] * (ti.cast(j, ti.f32) + jitter) / ti.cast(k, ti.f32)
-            t0, h = vals[r, V_T0], vals[r, V_H]
-            a = 0.0
-            if h > 0:
-                a = ti.min(1.0, ti.max(0.0, (ts - t0) / h))
-            pa, pb = _vec(vals, r, V_PA), _vec(vals, r, V_PB)
-            init_particle(E, S, slot, e, sid, pa + a * (pb - pa), _vec(vals, r, V_EV))
-            S.particle_age[slot] = -ti.max(0.0, ts - t0)  # born this long into the step
+            _born(E, S, rows, vals, r, j, slot)
     for e in range(E.count):
+        if E.emitter_moved[e] > 0:  # only when a ring slot was taken (nothing to do otherwise)
+            E.emitter_moved[e] = 0
+            cursor = 0
+            for r in range(nrows):
+                if rows[r, R_E] == e:
+                    start, size = rows[r, R_START], rows[r, R_SIZE]
+                    for j in range(rows[r, R_K]):
+                        if moved[rows[r, R_FIRST] + j] != 0:
+                            while cursor < size and S.particle_alive[start + cursor] != 0:
+                                cursor += 1
+                            if cursor < size:
+                                _born(E, S, rows, vals, r, j, start + cursor)
+                                cursor += 1
+                            else:
+                                E.dropped[e] += 1  # the segment is full
         if adv[e, A_SIZE] > 0:
             E.emitter_head[e] = (E.emitter_head[e] + adv[e, A_HEAD]) % adv[e, A_SIZE]
             E.emitter_serial[e] += adv[e, A_SERIAL]
@@ -136,16 +166,32 @@ def count_events(S: ti.template(), counts: ti.template(), p_start: ti.i32, p_siz
         counts[q] = n
 
 
+@ti.func
+def _child(E: ti.template(), S: ti.template(), i, c, sid, slot, bit):
+    """Child ``sid`` of emitter c from parent slot i, into ``slot``. A collision's children are
+    born where and when the impact was located: at the point on the surface, then moved along
+    their velocity for the time left in the step (the age they start with)."""
+    ti.atomic_add(E.emitter_emitted[c], 1)
+    if bit == EVENT_COLLISION:  # born at the located impact, as old as it is
+        lag = S.particle_impact_lag[i]
+        init_particle(E, S, slot, c, sid, S.particle_impact_pos[i], S.particle_vel[i])
+        S.particle_pos[slot] += lag * S.particle_vel[slot]
+        S.particle_age[slot] = lag
+    else:
+        init_particle(E, S, slot, c, sid, S.particle_pos[i], S.particle_vel[i])
+
+
 @ti.kernel
-def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), p_start: ti.i32,
-                   p_size: ti.i32, chunks: ti.i32, bit: ti.i32, min_speed: ti.f32, c: ti.i32,
+def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), moved: ti.template(),
+                   p_start: ti.i32, p_size: ti.i32, chunks: ti.i32, bit: ti.i32, min_speed: ti.f32, c: ti.i32,
                    c_start: ti.i32, c_size: ti.i32, count: ti.i32):
     """Pass 2: each slice adds up the counts before it (its parents' first rank) and walks its
     parents in slot order; the n-th child of the pass takes ring slot head + n and serial
-    serial + n. A collision's children are born where and when the impact was located: at the
-    point on the surface, then moved along their velocity for the time left in the step (the
-    age they start with). A child that finds its slot alive, or that would wrap onto a slot this pass already
-    gave out (n ≥ ring size), is counted dropped."""
+    serial + n. A child that would wrap onto a slot this pass already gave out (n ≥ ring size)
+    is counted dropped; one that finds its ring slot alive is marked in ``moved[n]`` (its parent
+    slot + 1) and, after the pass, takes the first free slot of the child segment in slot order
+    (one thread walks the marked children in n order: deterministic), or is counted dropped when
+    the segment is full."""
     h0, s0 = E.emitter_head[c], E.emitter_serial[c]
     size = (p_size + chunks - 1) // chunks
     for q in range(chunks):
@@ -157,20 +203,30 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), p_
                 for j in range(count):
                     n = rank * count + j
                     slot = c_start + (h0 + n) % c_size
-                    if n >= c_size or S.particle_alive[slot] != 0:
+                    if n >= c_size:
                         ti.atomic_add(E.dropped[c], 1)
+                    elif S.particle_alive[slot] != 0:
+                        moved[n] = i + 1  # placed below, in a free slot
+                        ti.atomic_add(E.emitter_moved[c], 1)
                     else:
-                        ti.atomic_add(E.emitter_emitted[c], 1)
-                        if bit == EVENT_COLLISION:  # born at the located impact, as old as it is
-                            lag = S.particle_impact_lag[i]
-                            init_particle(E, S, slot, c, s0 + n, S.particle_impact_pos[i], S.particle_vel[i])
-                            S.particle_pos[slot] += lag * S.particle_vel[slot]
-                            S.particle_age[slot] = lag
-                        else:
-                            init_particle(E, S, slot, c, s0 + n, S.particle_pos[i], S.particle_vel[i])
+                        moved[n] = 0
+                        _child(E, S, i, c, s0 + n, slot, bit)
                 rank += 1
     total = 0
     for q in range(chunks):
         total += counts[q]
+    for _ in range(1):  # one thread: the moved children in n order
+        if E.emitter_moved[c] > 0:
+            E.emitter_moved[c] = 0
+            cursor = 0
+            for n in range(ti.min(total * count, c_size)):
+                if moved[n] != 0:
+                    while cursor < c_size and S.particle_alive[c_start + cursor] != 0:
+                        cursor += 1
+                    if cursor < c_size:
+                        _child(E, S, moved[n] - 1, c, s0 + n, c_start + cursor, bit)
+                        cursor += 1
+                    else:
+                        E.dropped[c] += 1  # the segment is full
     E.emitter_head[c] = (h0 + total * count) % c_size
     E.emitter_serial[c] = s0 + total * count

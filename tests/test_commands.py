@@ -1,0 +1,61 @@
+"""Every command the README documents runs to exit 0 as a real process (slow; CI runs it).
+
+``particles chart`` once died of a segmentation fault with nothing printed, after the
+work–precision charts: each command here is a real ``python -m engine`` process, so a crash is
+an exit code below zero, and a failure must print exactly one error line. The commands run in
+their quick or small forms (the same code paths, fewer points).
+"""
+import os
+import subprocess
+import sys
+
+import pytest
+
+from runhelp import ENV, ROOT
+
+pytestmark = pytest.mark.slow
+
+
+def particles(*argv, timeout=1200):
+    return subprocess.run([sys.executable, "-m", "engine", *map(str, argv)], cwd=ROOT, env=ENV,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def ok(r):
+    assert r.returncode == 0, f"exit {r.returncode}: {r.stderr[-2000:]}"
+    return r
+
+
+def test_list_validate_schema_ode(tmp_path):
+    assert "sparks.toml" in ok(particles("list")).stdout
+    cfgs = sorted(os.path.join("configs", f) for f in os.listdir(os.path.join(ROOT, "configs"))
+                  if f.endswith(".toml"))
+    ok(particles("validate", *cfgs))
+    assert '"title"' in ok(particles("schema")).stdout
+    ok(particles("ode", "decay", "--method", "rk4", "--h", "0.1"))
+
+
+def test_chart_writes_every_chart(tmp_path):
+    """The whole ``particles chart`` (every chart, quick sweeps): it segfaulted before."""
+    from engine.tools.charts import CHARTS
+
+    r = ok(particles("chart", "--quick", "--quiet", "--out", tmp_path))
+    written = {os.path.basename(p) for p in r.stdout.split()}
+    for stem in ("stability", "energy_drift", "bounce", "workprec_kepler", "workprec_scene_sparks"):
+        assert {f"{stem}.png", f"{stem}.csv"} <= written, (stem, sorted(written))
+    assert len(CHARTS) == 5
+    for p in r.stdout.split():
+        assert os.path.getsize(p) > 0
+
+
+def test_run_profile_gallery(tmp_path):
+    ok(particles("run", "configs/hair.toml", "--size", "96x54", "--out", tmp_path / "hair", "--quiet"))
+    assert len([f for f in os.listdir(tmp_path / "hair") if f.endswith(".png")]) == 120
+    assert "ms" in ok(particles("profile", "configs/sparks.toml", "--frames", "3", "--size", "64x36")).stdout
+    ok(particles("gallery", "--out", tmp_path / "gallery", "--quiet"))
+    stills = [f for f in os.listdir(tmp_path / "gallery") if f.endswith(".png")]
+    assert len(stills) >= len([f for f in os.listdir(os.path.join(ROOT, "configs")) if f.endswith(".toml")])
+
+
+def test_bench_quick(tmp_path):
+    ok(particles("bench", "--quick", "--quiet", "--only", "step,ode"))
