@@ -310,3 +310,23 @@ def test_bad_collider_keys_are_one_line_naming_the_key(tmp_path, extra, key):
     code, out, err = call("validate", path)
     lines = out.strip().splitlines()
     assert code == 2 and len(lines) == 1 and key in lines[0] and "colliders" in lines[0], (out, err)
+
+
+@pytest.mark.slow
+def test_boxes_and_capsules_are_drawn_where_they_are():
+    # the background draws a box and a capsule (slab and capsule ray tests): shown, the pixels at
+    # their projected centres change; the sky far from them does not
+    s = (SceneBuilder(seed=1, fps=30).forces(gravity=[0, -G, 0]).render(width=160, height=90, grid=False)
+         .camera(position=[0.0, 0.4, 4.0], look_at=[0.0, 0.4, 0.0], fov=40.0)
+         .emitter(name="e", rate=1.0, position=[0, -50, 0], lifetime=0.1)
+         .collider(type="box", name="b", center=[-0.8, 0.4, 0.0], half_extents=[0.3, 0.3, 0.3],
+                   orientation=list(quat_from_rotvec([0.0, 0.7, 0.0])))
+         .collider(type="capsule", name="c", center=[0.8, 0.4, 0.0], radius=0.2, half_length=0.3,
+                   orientation=list(quat_from_rotvec([0.0, 0.0, 0.8])))
+         .build(render=True))
+    shown, hidden = s.render(show_colliders=True), s.render(show_colliders=False)
+    diff = np.abs(shown.astype(int) - hidden.astype(int)).sum(axis=2)
+    f = 45 / math.tan(math.radians(20))  # pixels per unit of x/z at the image centre row
+    for x in (-0.8, 0.8):
+        assert diff[45, int(round(80 + f * x / 4.0))] > 0, x
+    assert diff[:10, :10].max() == 0 and diff[:, 75:85].max() == 0  # sky, and the gap between them
