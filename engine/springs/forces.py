@@ -15,6 +15,8 @@ and drag toward the wind when the scene has drag: ``fields.external``, added to 
 """
 import taichi as ti
 
+from ..forces.fields import PointForces
+
 ACCUMULATORS = ("gather", "atomic")
 
 
@@ -67,7 +69,10 @@ def accel_atomic(model: ti.template(), fields: ti.template(), X: ti.template(), 
 
 def accel_launcher(model, fields, accumulate: str = "gather"):
     """``accel(X, V, A, j)`` for the staged steppers (engine.ode.staged); nothing to do for an
-    empty network. ``fields``: :class:`~engine.forces.fields.PointForces`."""
+    empty network. ``fields``: :class:`~engine.forces.fields.PointForces` (a bare 0-d gravity
+    field, as callers passed before force fields reached the nodes, is gravity alone)."""
+    if not isinstance(fields, PointForces):
+        fields = PointForces(fields, dtype=model.dtype)
     if accumulate not in ACCUMULATORS:
         raise ValueError(f"accumulate: unknown value {accumulate!r}; allowed: {', '.join(ACCUMULATORS)}")
     kernel = accel_gather if accumulate == "gather" else accel_atomic

@@ -14,6 +14,8 @@ than ks (sagging), never exploding. Springs with ks = 0 are skipped.
 """
 import taichi as ti
 
+from ..forces.fields import PointForces
+
 
 @ti.kernel
 def _predict(model: ti.template(), state: ti.template(), fields: ti.template(), x_prev: ti.template(),
@@ -73,7 +75,10 @@ class XPBDStepper:
     fevals = 1
 
     def __init__(self, model, state, fields, iterations: int = 10):
-        """``fields``: :class:`~engine.forces.fields.PointForces` (gravity, drag, wind)."""
+        """``fields``: :class:`~engine.forces.fields.PointForces` (gravity, drag, wind; a bare 0-d
+        gravity field is gravity alone)."""
+        if not isinstance(fields, PointForces):
+            fields = PointForces(fields, dtype=model.dtype)
         dtype, N, M = model.dtype, max(1, model.node_count), max(1, model.spring_count)
         self.model, self.state, self.fields, self.iterations = model, state, fields, int(iterations)
         self.x_prev = ti.Vector.field(3, dtype, N)
