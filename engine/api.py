@@ -269,6 +269,32 @@ class ParticleScene(RigidAPI):
         k, p = self._collider("move_collider", name), vector("move_collider: position", position)
         s.control.move_collider(k, s.t, s.t + self._over("move_collider", over, s), p)
 
+    def set_collider_pose(self, name: str, position, orientation=None, velocity=None, angular_velocity=None,
+                          over: float | None = None) -> None:
+        """Place collider ``name`` at ``position`` (m) with ``orientation`` ([w, x, y, z], None: as
+        it turns now) by the end of the next step of length ``over`` (default: one frame).
+        ``velocity`` (m/s) and ``angular_velocity`` (rad/s, world): its motion over that step
+        (None: inferred from the move; a spin kept after it), which the surface point's velocity
+        v + ω × r hands to what it hits. Spinning needs a collider built to rotate (its config's
+        ``angular_velocity`` or ``rotates = true``); others are turned without a spin."""
+        where = "set_collider_pose"
+        s = self._live(where)
+        k = self._collider(where, name)
+        p = vector(f"{where}: position", position)
+        q = None if orientation is None else vector(f"{where}: orientation", orientation, 4)
+        if q is not None and math.fsum(c * c for c in q) < 1e-12:
+            raise ValueError(f"{where}: orientation {checks.show(orientation)} is not allowed: a quaternion "
+                             f"[w, x, y, z] must not be zero")
+        v = None if velocity is None else vector(f"{where}: velocity", velocity)
+        w = None if angular_velocity is None else vector(f"{where}: angular_velocity", angular_velocity, bound=1e4)
+        if not s.colliders.specs[k].spins:
+            if w is not None and any(w):
+                raise ValueError(f"{where}: angular_velocity {checks.show(angular_velocity)} is not allowed: "
+                                 f"collider {name!r} was built without rotation (give it an angular_velocity "
+                                 f"or rotates = true in its config)")
+            w = (0.0, 0.0, 0.0)  # turned without a spin: a shape that cannot spin is placed, not swept
+        s.control.set_collider_pose(k, s.t, s.t + self._over(where, over, s), p, q, v, w)
+
     def set_wind(self, wind) -> None:
         """Air velocity (m/s) seen by drag."""
         self._live("set_wind").control.set_wind(vector("set_wind: wind", wind))
@@ -339,16 +365,15 @@ class ParticleScene(RigidAPI):
         b = None if body is None else self._body("contacts", body)
         if not self._contacts:
             raise RuntimeError("contacts: build the scene with contacts=True to record them")
-        names = tuple(c.name for c in self.cfg.colliders)
-        if s.particles is not None:  # with rigid spheres after the config's (named after the bodies)
-            names = tuple(c.name for c in s.particles.colliders.specs)
+        names, shapes = s.colliders.names, s.colliders.parties  # the one shape table's
         if b is not None:
             if not b.cfg.contacts:
                 raise RuntimeError(f"contacts: body {body!r} does not record contacts: set contacts = true "
                                    f"in its config")
-            c = b.contacts(names)
+            c = b.contacts(names, shapes)
         else:
-            c = s.particles.contacts(names) if s.particles is not None else Contacts.empty(names)
+            c = (s.particles.contacts(names, shapes) if s.particles is not None
+                 else Contacts.empty(names, shapes=shapes))
         return c.where(c.speed >= v) if v > 0 else c
 
     def render(self, width: int | None = None, height: int | None = None, camera: Camera | None = None,

@@ -2,7 +2,6 @@
 of the scene (:mod:`engine.system`)."""
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -37,30 +36,18 @@ def build_topology(b):
     return jelly(*b.resolution, size=b.size, origin=b.position, pinned=pinned, **kw)
 
 
-def _thickened(specs, d):
-    """The scene's colliders for a body keeping distance d from them: spheres grow by d, planes
-    move by d along their normal (a shift added to the position the control gives). ``kill`` is
-    for particles: a body's nodes bounce off every collider."""
-    out, shift = [], np.zeros((len(specs), 3))
-    for k, spec in enumerate(specs):
-        s = dataclasses.replace(spec, kill=False)
-        if s.kind == "sphere":
-            s.radius = spec.radius + d
-        else:
-            n = np.asarray(spec.normal, np.float64)
-            shift[k] = d * n / np.linalg.norm(n)
-        out.append(s)
-    return Colliders(out, shift)
-
-
 class SoftBody(SystemBase):
-    """One soft body of a scene: its spring system, its own colliders (the scene's, thickened,
-    at the positions the scene's control gives: a moving collider infers its velocity from its
-    own updates) and what the renderer draws."""
+    """One soft body of a scene: its spring system, the scene's shape table seen through its
+    thickness (a :class:`~engine.colliders.ColliderView`: an offset, not a copy) and what the
+    renderer draws."""
 
-    def __init__(self, cfg, collider_specs, control, default_integrator, index: int = 0, contacts: int = 0):
-        """``contacts``: node–collider records kept between drains when the body's config asks
-        (``contacts = true``)."""
+    def __init__(self, cfg, colliders, control, default_integrator, index: int = 0, contacts: int = 0,
+                 forces=None):
+        """``colliders``: the scene's shape table (:class:`~engine.colliders.Colliders`; a list of
+        :class:`~engine.colliders.ColliderSpec` builds one of its own). ``contacts``: node–shape
+        records kept between drains when the body's config asks (``contacts = true``).
+        ``forces``: the scene's ``[forces]`` config (drag and wind reach the nodes; None: gravity
+        only)."""
         self.cfg, self.index = cfg, index
         self.name = cfg.name or f"soft_bodies[{index}]"
         self._pin_path = Path((k.time, k.position) for k in cfg.pin_path or ())  # sampled each step
@@ -71,13 +58,18 @@ class SoftBody(SystemBase):
             raise ValueError(f"pins: node {bad[0]} does not exist (the body has {n} nodes)")
         # nodes keep `thickness` from every surface: flat triangles between nodes resting on a
         # sphere would otherwise cut into it (a chord lies inside the circle)
-        self.colliders = _thickened(collider_specs, cfg.thickness) if collider_specs else None
+        if colliders is not None and not isinstance(colliders, Colliders):
+            colliders = Colliders(list(colliders)) if len(colliders) else None
+        self.colliders = colliders.view(cfg.thickness) if colliders is not None and colliders.count else None
         integrator = cfg.integrator or default_integrator
         self.system = SpringSystem(self.topology, colliders=self.colliders, control=control,
                                    integrator=integrator, substeps=cfg.substeps,
                                    xpbd_iterations=cfg.iterations, max_stretch=cfg.max_stretch,
                                    name=f"bodies[{index}] ({cfg.type})",
                                    contacts=contacts if cfg.contacts else 0,
+                                   drag=forces.drag if forces is not None else 0.0,
+                                   attractors=forces.attractors if forces is not None else (),
+                                   vortices=forces.vortices if forces is not None else (),
                                    self_collision=cfg.thickness if cfg.self_collision else 0.0)
         self.control = control
         self.pinned = np.array(self.topology.pinned, np.int64)
@@ -109,8 +101,13 @@ class SoftBody(SystemBase):
     def node_count(self) -> int:
         return self.topology.node_count
 
-    def contacts(self, names=()):
-        return self.system.contact_log.drain(names)
+    def contacts(self, names=(), shapes=()):
+        """Node contacts since the last call (:class:`~engine.contacts.Contacts`; each row names
+        this body and the shape); ``names``, ``shapes``: the shape table's (default: this body's
+        table's)."""
+        if not names and not shapes and self.colliders is not None:
+            names, shapes = self.colliders.names, self.colliders.parties
+        return self.system.contact_log.drain(names, (self.name,), shapes)
 
     def step(self, t0: float, dt: float) -> None:
         """Advance from t0 by dt: pins follow their path, let go at ``release_at``, then take the

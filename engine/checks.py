@@ -34,6 +34,9 @@ LIMITS = {
     "frame_time (FixedTimestep.advance)": "finite, >= 0 (a stall is cut to max_steps steps; a step that raised drops the time left)",
     "name (emitter, collider, body)": "a str naming one in the scene (KeyError lists the names)",
     "position, target (m)": f"3 finite numbers within ±{COORD:g}: list, tuple or NumPy array",
+    "orientation (set_collider_pose)": f"None or 4 finite numbers [w, x, y, z] within ±{COORD:g}, not all zero",
+    "velocity, angular_velocity (set_collider_pose)": f"None or 3 finite numbers (m/s within ±{COORD:g}, "
+                                                      "rad/s within ±1e4); a spin needs a collider built to rotate",
     "wind (m/s), gravity (m/s²)": f"3 finite numbers within ±{COORD:g}",
     "over (s)": "None (one frame) or finite, > 0 and <= max_dt",
     "rate (particles/s)": "finite, 0 to 1e8 (the config's bound)",

@@ -1,28 +1,37 @@
-"""Plane and sphere colliders, static or moving, shared by particles and spring nodes.
+"""The shape table: planes, spheres, boxes and capsules, static, moving or spinning, shared by
+particles, spring nodes and (publishing their poses into it) rigid bodies.
 
-A collider is an *event set* for the ODE core's event location (:mod:`engine.ode.events`): its
-contact function g is the signed distance from its surface (negative inside), g = (x − p)·N for a
-plane and |x − c| − R for a sphere (NUMERICS.md, "Collisions"), evaluated against where the
-collider is at the same time — a collider moves linearly over a step, from ``collider_point −
-collider_vel·h`` to ``collider_point``, so at ``lag`` seconds before the step's end it is at
-``collider_point − collider_vel·lag``.
+The table is an *event set* for the ODE core's event location (:mod:`engine.ode.events`): its
+contact function g is the signed distance from a shape's surface (negative inside;
+:mod:`engine.geometry.shapes`), g = (x − p)·N for a plane and |x − c| − R for a sphere (NUMERICS.md,
+"Collisions"), evaluated against where the shape is at the same time. A shape's pose moves over a
+step with constant linear velocity v and angular velocity ω (world frame): at ``lag`` seconds
+before the step's end it is at p₁ − v·lag, turned back by the rotation vector −ω·lag
+(Rodrigues, :func:`~engine.geometry.shapes.rotate`), and the surface point at x moves at
+v + ω × (x − p). Its rate ġ = (ẋ − v − ω × (x − p))·N.
 
-Response (Witkin & Baraff, *Particle System Dynamics*; NUMERICS.md), in the collider's frame so a
-moving collider pushes what it hits: with v_r = v − v_c, v_n = (N·v_r)N, v_t = v_r − v_n,
-v_r' = v_t' − e v_n with Coulomb-style friction v_t' = max(0, 1 − μ(1 + e)|v_n|/|v_t|) v_t; the
-point is put on the surface. Energy (in the collider's frame) never grows for e ≤ 1.
+Response (Witkin & Baraff, *Particle System Dynamics*; NUMERICS.md), in the frame of the surface
+point so a moving or spinning shape pushes and drags what it hits: with v_s = v + ω × r the surface
+point's velocity, v_r = v − v_s, v_n = (N·v_r)N, v_t = v_r − v_n, v_r' = v_t' − e v_n with
+Coulomb-style friction v_t' = max(0, 1 − μ(1 + e)|v_n|/|v_t|) v_t; the point is put on the
+surface. Energy (in the surface point's frame) never grows for e ≤ 1.
 
-Held (resting) contact: a point that ends a step inside a collider is projected back
-(:meth:`Colliders.project`); if it started the step touching that collider and its rebound e|v_n|
+Held (resting) contact: a point that ends a step inside a shape is projected back
+(:meth:`Colliders.project`); if it started the step touching that shape and its rebound e|v_n|
 would be no more than what the step's own acceleration takes out of it (−N·Δv over the step: the
 rebound would land within about two steps) it rests — v_n' = 0, friction with e = 0 — so a
 particle lying on the ground is held there, not bounced and re-detected at every step (the end
 of a bouncing ball's Zeno series).
 
-The set of colliders is fixed when a scene is finalised: their count is a compile-time constant
-and the per-collider loop is unrolled with ``ti.static``, so a scene with no colliders compiles no
-collision code. Their positions live in fields, set from the scene's Control (engine.control)
-before each step: moving one costs no recompilation.
+One table per scene: the particles read it as it is; a soft body reads it through a
+:class:`ColliderView` whose compile-time ``offset`` (the body's thickness) is subtracted from every
+signed distance — its nodes keep that distance from every surface — sharing the table's fields,
+so a moving shape is written once. The set of shapes is fixed when a scene is finalised: their
+count, kinds and whether each spins are compile-time constants and the per-shape loop is unrolled
+with ``ti.static``, so a scene with no colliders compiles no collision code, one without boxes no
+box code, and a shape that does not spin the same arithmetic as before shapes could spin. Poses
+live in fields, set from the scene's Control (engine.control) before each step: moving or turning
+one costs no recompilation.
 """
 # (no __future__ annotations: Taichi reads the funcs' ti.template() annotations)
 
@@ -32,15 +41,26 @@ from typing import List, Sequence
 import numpy as np
 import taichi as ti
 
+from .geometry.shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, box_local, quat_normalize, quat_to_matrix, rotate,
+                              spun, turn, turned)
 from .ode.events import contact_band
 
-PLANE, SPHERE = 0, 1
+__all__ = ["ColliderSpec", "Colliders", "ColliderView", "PLANE", "SPHERE", "BOX", "CAPSULE", "KINDS", "OWNERS"]
+OWNERS = ("collider", "rigid")  # who a shape belongs to: a config's collider, or a rigid body's shape
+IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 @dataclass
 class ColliderSpec:
-    """One collider. ``kind`` is "plane" (point, normal) or "sphere" (center = point, radius).
-    ``path`` is an optional list of (time, position) keyframes moving ``point``."""
+    """One shape. ``kind`` is "plane" (point, normal), "sphere" (centre = point, radius), "box"
+    (centre = point, ``half_extents`` along its body axes) or "capsule" (centre = point, radius,
+    ``half_length`` of its segment along the body y axis). ``orientation``: unit quaternion
+    [w, x, y, z] turning the body axes (a plane's normal, the capsule's axis) into the world;
+    ``angular_velocity``: rad/s, world frame, about ``point``. ``rotates``: compile the spinning
+    code even while ω is zero (a pose set from code or by a rigid body); a shape with a nonzero
+    ``angular_velocity`` rotates anyway. ``path``: optional (time, position) keyframes moving
+    ``point``. ``owner``: "collider" or "rigid" (what a contact names the shape as);
+    ``owner_index``: the rigid body's index (−1: none)."""
 
     kind: str
     point: Sequence[float] = (0.0, 0.0, 0.0)
@@ -52,32 +72,67 @@ class ColliderSpec:
     name: str = ""
     path: List = field(default_factory=list)
     visible: bool = True
-    rigid: bool = False  # stands for a rigid body's sphere (moved from its published pose)
+    half_extents: Sequence[float] = (0.5, 0.5, 0.5)
+    half_length: float = 0.5
+    orientation: Sequence[float] = IDENTITY
+    angular_velocity: Sequence[float] = (0.0, 0.0, 0.0)
+    rotates: bool = False
+    owner: str = "collider"
+    owner_index: int = -1
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"kind: unknown shape {self.kind!r}; allowed: {', '.join(KINDS)}")
+        if self.owner not in OWNERS:
+            raise ValueError(f"owner: unknown value {self.owner!r}; allowed: {', '.join(OWNERS)}")
+
+    @property
+    def spins(self) -> bool:
+        """Whether the spinning code is compiled for this shape (a compile-time switch)."""
+        return bool(self.rotates) or any(float(c) != 0.0 for c in self.angular_velocity)
 
     def position_at(self, t: float) -> np.ndarray:
         from .paths import sample_path
 
         return sample_path(self.path, t, self.point)
 
+    def orientation_at(self, t: float) -> np.ndarray:
+        """The orientation at time t: ``orientation`` spun at ``angular_velocity`` since t = 0."""
+        q = quat_normalize(self.orientation)
+        return spun(q, self.angular_velocity, t) if any(float(c) != 0.0 for c in self.angular_velocity) else q
+
 
 @ti.data_oriented
 class Colliders:
-    """Fields for a fixed list of colliders and the ``ti.func`` s that find and resolve contacts.
+    """Fields for a fixed list of shapes and the ``ti.func`` s that find and resolve contacts.
 
     Fields (shape (count,), ``dtype``: f32 for scenes, f64 for reference runs): ``collider_point``
-    (plane point or sphere centre at the end of the current step, m), ``collider_normal`` (unit,
-    planes), ``collider_radius`` (m), ``collider_vel`` (m/s over the current step),
-    ``collider_restitution``, ``collider_friction``. ``shift`` (count, 3): an offset added to
-    every position (a soft body keeps its thickness from a plane by a copy of it moved along the
-    normal). ``count``, ``kinds`` and ``kills`` are compile-time constants of the kernels.
+    (plane point or shape centre at the end of the current step, m), ``collider_normal`` (unit,
+    world: a plane's normal, a capsule's axis, a box's y axis), ``collider_radius`` (m: sphere, capsule),
+    ``collider_vel`` (m/s over the current step), ``collider_restitution``, ``collider_friction``;
+    where a scene has such shapes, ``collider_half`` (m: a box's half extents, a capsule's half
+    length in y), ``collider_axis_x``, ``collider_axis_z`` (a box's body axes in world; its y axis
+    is ``collider_normal``) and
+    ``collider_omega`` (rad/s: spinning shapes). ``count``, ``kinds``, ``spins``, ``kills`` and
+    ``offset`` (m, subtracted from every signed distance: 0 here, a soft body's thickness in a
+    :class:`ColliderView`) are compile-time constants of the kernels.
     """
 
-    def __init__(self, specs: Sequence[ColliderSpec], shift=None, dtype=ti.f32):
+    offset = 0.0
+
+    def __init__(self, specs: Sequence[ColliderSpec], dtype=ti.f32):
         self.specs = list(specs)
         self.count = len(self.specs)
         self.dtype = dtype
-        self.kinds = tuple(PLANE if s.kind == "plane" else SPHERE for s in self.specs)
+        self.kinds = tuple(KINDS.index(s.kind) for s in self.specs)
+        self.spins = tuple(s.spins for s in self.specs)
         self.kills = tuple(bool(s.kill) for s in self.specs)
+        self.rotating = any(self.spins)
+        self.names = tuple(s.name for s in self.specs)
+        self.owners = tuple(s.owner for s in self.specs)
+        # what a contact names each shape as: (kind, index) — a config's collider by its own
+        # index, a rigid body's shape by the body's
+        self.parties = tuple((s.owner, s.owner_index if s.owner_index >= 0 else k) for k, s in enumerate(self.specs))
         n = max(1, self.count)
         self.collider_point = ti.Vector.field(3, dtype, shape=n)
         self.collider_normal = ti.Vector.field(3, dtype, shape=n)
@@ -85,40 +140,84 @@ class Colliders:
         self.collider_vel = ti.Vector.field(3, dtype, shape=n)
         self.collider_restitution = ti.field(dtype, shape=n)
         self.collider_friction = ti.field(dtype, shape=n)
+        # the fields of the features in use only (a scene pays for what it has)
+        if any(k in (BOX, CAPSULE) for k in self.kinds):
+            self.collider_half = ti.Vector.field(3, dtype, shape=n)
+        if BOX in self.kinds:  # a box's x and z axes (its y axis is in collider_normal)
+            self.collider_axis_x = ti.Vector.field(3, dtype, shape=n)
+            self.collider_axis_z = ti.Vector.field(3, dtype, shape=n)
+        if self.rotating:
+            self.collider_omega = ti.Vector.field(3, dtype, shape=n)
         self._np = np.float64 if dtype == ti.f64 else np.float32
         self._pos = np.zeros((n, 3), self._np)
-        self.shift = np.zeros((self.count, 3)) if shift is None else np.asarray(shift, np.float64).reshape(-1, 3)
+        self._quat = np.zeros((n, 4))
+        self._omega = np.zeros((n, 3))
+        self._turned = False
         for k, s in enumerate(self.specs):
-            nrm = np.asarray(s.normal, np.float64)
-            self.collider_normal[k] = (nrm / np.linalg.norm(nrm)).tolist()
             self.collider_radius[k] = float(s.radius)
             self.collider_restitution[k] = float(s.restitution)
             self.collider_friction[k] = float(s.friction)
-            self._pos[k] = s.position_at(0.0) + self.shift[k]
+            if self.kinds[k] == BOX:
+                self.collider_half[k] = [float(c) for c in s.half_extents]
+            elif self.kinds[k] == CAPSULE:
+                self.collider_half[k] = [0.0, float(s.half_length), 0.0]
+            self._pos[k] = s.position_at(0.0)
         self.collider_point.from_numpy(self._pos)
+        self._orient([s.orientation_at(0.0) for s in self.specs], [s.angular_velocity for s in self.specs])
         self._t = 0.0
         self._band = contact_band(dtype)
         self._moved = False
+
+    # -- poses ------------------------------------------------------------------------------------
+    def _orient(self, quats, omegas) -> None:
+        """Orientations (count, 4) and angular velocities (count, 3) at the current placement:
+        the normals, capsule axes and box axes written to the fields. A plane left at its rest
+        orientation keeps its configured normal exactly (no rotation arithmetic)."""
+        if self.count == 0:
+            return
+        nrm = np.zeros((max(1, self.count), 3))
+        rot = np.zeros((max(1, self.count), 3, 3))
+        for k, s in enumerate(self.specs):
+            q = quat_normalize(quats[k])
+            w = np.asarray(omegas[k], np.float64).reshape(3)
+            if w.any() and not self.spins[k]:
+                raise ValueError(f"angular_velocity: collider {s.name or k!r} was built without rotation "
+                                 f"(give it an angular_velocity or rotates = true); got {w.tolist()}")
+            self._quat[k], self._omega[k] = q, w
+            rot[k] = R = quat_to_matrix(q)
+            if self.kinds[k] in (CAPSULE, BOX):
+                nrm[k] = R[:, 1]
+            else:  # a plane's normal (at its rest orientation exactly as configured)
+                n0 = np.asarray(s.normal, np.float64)
+                n0 = n0 / np.linalg.norm(n0)
+                nrm[k] = n0 if np.array_equal(q, IDENTITY) else R @ n0
+        self.collider_normal.from_numpy(nrm.astype(self._np))
+        if BOX in self.kinds:
+            self.collider_axis_x.from_numpy(np.ascontiguousarray(rot[:, :, 0]).astype(self._np))
+            self.collider_axis_z.from_numpy(np.ascontiguousarray(rot[:, :, 2]).astype(self._np))
+        if self.rotating:
+            self.collider_omega.from_numpy(self._omega.astype(self._np))
 
     def reset(self) -> None:
         """Back where the specs start, at rest, at t = 0 (a reused scene)."""
         if self._moved:
             for k, s in enumerate(self.specs):
-                self._pos[k] = s.position_at(0.0) + self.shift[k]
+                self._pos[k] = s.position_at(0.0)
             self.collider_point.from_numpy(self._pos)
             self.collider_vel.from_numpy(np.zeros_like(self._pos))
-        self._t, self._moved = 0.0, False
+        if self._turned or self.rotating:
+            self._orient([s.orientation_at(0.0) for s in self.specs], [s.angular_velocity for s in self.specs])
+        self._t, self._moved, self._turned = 0.0, False, False
 
     def _placed(self, positions) -> np.ndarray:
-        # (the control may hold more colliders after these: rigid bodies' spheres for particles)
-        pos = np.asarray(positions, np.float64).reshape(-1, 3)[: self.count]
-        return (pos + self.shift).astype(self._np) if self.shift.any() else pos.astype(self._np)
+        return np.asarray(positions, np.float64).reshape(self.count, 3).astype(self._np)
 
-    def move_to(self, t: float, positions=None, since=None) -> None:
-        """Set the colliders' positions for time t (``positions`` (count, 3), else from their
+    def move_to(self, t: float, positions=None, since=None, orientations=None, omegas=None) -> None:
+        """Set the shapes' positions for time t (``positions`` (count, 3), else from their
         specs' paths). Their velocities: over the step ``since = (t0, positions at t0)`` when
         given (a step's start, so a retried shorter step infers the same motion), else from the
-        motion since the last call."""
+        motion since the last call. ``orientations`` (count, 4) [w, x, y, z] at t and ``omegas``
+        (count, 3) rad/s over the step: given, or (a table with spinning shapes) from the specs."""
         if self.count == 0:
             return
         new = self._placed([s.position_at(t) for s in self.specs] if positions is None else positions)
@@ -131,12 +230,36 @@ class Colliders:
         v = np.zeros_like(self._pos)
         v[: self.count] = vel
         self.collider_vel.from_numpy(v)
+        if orientations is not None or omegas is not None or self.rotating:
+            qs = [s.orientation_at(t) for s in self.specs] if orientations is None else orientations
+            ws = [s.angular_velocity for s in self.specs] if omegas is None else omegas
+            self._orient(qs, ws)
+            self._turned = True
+
+    def follow(self, control, t0: float, t1: float) -> bool:
+        """Place the shapes where ``control`` (engine.control) has them at t1, moving since t0
+        (the step's start): positions, and orientations with their angular velocities when some
+        shape turns. Whether anything moves (nothing is written otherwise)."""
+        if not (self.count and control.colliders_move):
+            return False
+        turn = self.rotating or control.colliders_turn
+        self.move_to(t1, control.collider_positions(t1), since=(t0, control.collider_positions(t0)),
+                     orientations=control.collider_orientations(t1) if turn else None,
+                     omegas=control.collider_omegas() if turn else None)
+        return True
+
+    def pose(self, k: int) -> dict:
+        """Shape k as placed now: ``position`` (3,), ``orientation`` [w, x, y, z], ``velocity``,
+        ``angular_velocity`` (float64 copies of the host's values)."""
+        return dict(position=self._pos[k].astype(np.float64), orientation=self._quat[k].copy(),
+                    velocity=self.collider_vel[k].to_numpy().astype(np.float64),
+                    angular_velocity=self._omega[k].copy())
 
     def placement(self) -> bytes:
-        """Where the colliders are now, as bytes (normals and radii never change): what a cached
+        """Where the shapes are now, as bytes (radii and extents never change): what a cached
         background depends on. Read from the host copy, so it costs no kernel launch."""
-        shown = [k for k, s in enumerate(self.specs) if s.visible]
-        return self._pos[shown].tobytes()
+        shown = [k for k, s in enumerate(self.specs) if s.visible]  # a rigid body's own shape is drawn by the body
+        return self._pos[shown].tobytes() + (self._quat[shown].tobytes() if self._turned else b"")
 
     def index(self, name: str) -> int:
         for k, s in enumerate(self.specs):
@@ -145,44 +268,103 @@ class Colliders:
         raise KeyError(f"collider: no collider named {name!r} "
                        f"(names: {', '.join(repr(s.name) for s in self.specs if s.name) or 'none'})")
 
+    def view(self, offset: float = 0.0, kill: bool = False) -> "ColliderView":
+        """This table as seen by points that keep ``offset`` m from every surface (a soft body's
+        thickness); ``kill`` False: touching a ``kill`` shape does not end their motion."""
+        return ColliderView(self, offset, kill)
+
     # -- the event set (engine.ode.events) ---------------------------------------------------------
     def linear(self, k: int) -> bool:
-        """Whether contact k is linear in x (a plane): its root under constant acceleration is
-        a quadratic's (engine.ode.events)."""
-        return self.kinds[k] == PLANE
+        """Whether contact k is linear in x along a step (a plane that does not spin): its root
+        under constant acceleration is a quadratic's (engine.ode.events)."""
+        return self.kinds[k] == PLANE and not self.spins[k]
 
     def stops(self, k: int) -> bool:
-        """Whether touching collider k ends the point's motion (``kill``)."""
+        """Whether touching shape k ends the point's motion (``kill``)."""
         return self.kills[k]
 
     @ti.func
     def contact(self, k: ti.template(), x, xd, lag):
-        """(g, dg/dt, N) of collider k for a point at x moving at xd, ``lag`` seconds before the
-        step's end: the signed distance from the surface (m, negative inside), its rate (m/s, the
-        collider's own motion included) and the outward unit normal there."""
+        """(g, dg/dt, N) of shape k for a point at x moving at xd, ``lag`` seconds before the
+        step's end: the signed distance from the surface less ``offset`` (m, negative inside), its
+        rate (m/s, the shape's own motion and spin included) and the outward unit normal there."""
         p = self.collider_point[k] - self.collider_vel[k] * lag
         N = ti.Vector([0.0, 1.0, 0.0], dt=self.dtype)
         g = ti.cast(0.0, self.dtype)
-        if ti.static(self.kinds[k] == PLANE):
+        vs = self.collider_vel[k]  # the velocity of the surface point under x
+        kind, spin, d = ti.static(self.kinds[k], self.spins[k], self.offset)
+        if ti.static(kind == PLANE):
             N = self.collider_normal[k]
+            if ti.static(spin):
+                N = rotate(N, self.collider_omega[k], -lag)
             g = (x - p).dot(N)
-        else:
-            d = x - p
-            dist = d.norm()
+            if ti.static(d != 0.0):
+                g -= d
+        elif ti.static(kind == SPHERE):
+            dd = x - p
+            dist = dd.norm()
             if dist > 1e-12:
-                N = d / dist
-            g = dist - self.collider_radius[k]
-        return g, (xd - self.collider_vel[k]).dot(N), N
+                N = dd / dist
+            if ti.static(d != 0.0):  # R + d rounded once, as a copy of the table thickened by d held it
+                g = dist - ti.static(self.specs[k].radius + d)
+            else:
+                g = dist - self.collider_radius[k]
+        elif ti.static(kind == BOX):
+            # against the axes at the step's end, the point turned forward by ω·lag (R(t)ᵀ r =
+            # R₁ᵀ Rot(ω·lag) r), the normal turned back by the same rotation
+            r = x - p
+            ex, ey, ez = self.collider_axis_x[k], self.collider_normal[k], self.collider_axis_z[k]
+            if ti.static(spin):
+                ax, c, sn = turn(self.collider_omega[k], lag)
+                gl, nw = box_local(turned(r, ax, c, sn), ex, ey, ez, self.collider_half[k])
+                N = turned(nw, ax, c, -sn)
+                g = gl - d
+            else:
+                g, N = box_local(r, ex, ey, ez, self.collider_half[k])
+                if ti.static(d != 0.0):
+                    g -= d
+        else:  # capsule: the segment p ± L a, a = the body y axis at that time
+            a = self.collider_normal[k]
+            if ti.static(spin):
+                a = rotate(a, self.collider_omega[k], -lag)
+            r = x - p
+            half = self.collider_half[k][1]
+            dd = r - ti.min(ti.max(r.dot(a), -half), half) * a
+            dist = dd.norm()
+            if dist > 1e-12:
+                N = dd / dist
+            g = dist - (self.collider_radius[k] + d)
+        if ti.static(spin):
+            vs = vs + self.collider_omega[k].cross(x - p)
+        return g, (xd - vs).dot(N), N
+
+    @ti.func
+    def surface_velocity(self, k: ti.template(), x, lag):
+        """The velocity (m/s) of shape k's material point at x, ``lag`` s before the step's end:
+        v + ω × (x − p) (v alone for a shape that does not spin: the same arithmetic as before
+        shapes could spin)."""
+        vs = self.collider_vel[k]
+        if ti.static(self.spins[k]):
+            vs = vs + self.collider_omega[k].cross(x - (self.collider_point[k] - self.collider_vel[k] * lag))
+        return vs
 
     @ti.func
     def respond(self, k: ti.template(), x, v, lag, dv):
-        """Put x on collider k's surface (as placed ``lag`` s before the step's end) and respond:
-        restitution and friction on the velocity relative to the collider, or rest (module
-        docstring) when e·|v_n| ≤ −N·dv (``dv``: the step's velocity change; zero at a located
-        impact, which always bounces). Returns (x', v', impact speed −N·v_r ≥ 0, normal N)."""
+        """Put x on shape k's surface (as placed ``lag`` s before the step's end; ``offset`` from
+        it) and respond: restitution and friction on the velocity relative to the surface point,
+        or rest (module docstring) when e·|v_n| ≤ −N·dv (``dv``: the step's velocity change; zero
+        at a located impact, which always bounces). Returns (x', v', impact speed −N·v_r ≥ 0,
+        normal N)."""
         g, _gd, N = self.contact(k, x, v, lag)
+        return self._reflect(k, x, v, lag, dv, g, N)
+
+    @ti.func
+    def _reflect(self, k: ti.template(), x, v, lag, dv, g, N):
+        """:meth:`respond` given shape k's (g, N) at x (a caller that has them saves inlining the
+        contact function once more: a box's is long)."""
         x = x - g * N
-        vr = v - self.collider_vel[k]
+        vc = self.surface_velocity(k, x, lag)
+        vr = v - vc
         vn_s = vr.dot(N)
         speed = ti.max(-vn_s, 0.0)
         if vn_s < 0.0:
@@ -195,28 +377,68 @@ class Colliders:
             scale = ti.cast(0.0, self.dtype)
             if vt_len > 1e-12:
                 scale = ti.max(0.0, 1.0 - self.collider_friction[k] * (1.0 + e) * speed / vt_len)
-            v = scale * vt - e * vn + self.collider_vel[k]
+            v = scale * vt - e * vn + vc
         return x, v, speed, N
 
     @ti.func
     def project(self, x, v, x0, v0, h):
-        """Every collider in turn: a point that ended the step of h (from x0, v0) inside is put
-        back on the surface and responds; if it started the step touching that collider (within
+        """Every shape in turn: a point that ended the step of h (from x0, v0) inside is put
+        back on the surface and responds; if it started the step touching that shape (within
         the rounding band) it may rest (:meth:`respond` with the step's velocity change), so
         contact at rest is held while a point arriving from outside always bounces. Returns (x',
-        v', hits, killed, last collider touched (−1: none), its normal, the impact speed there)."""
+        v', hits, killed, last shape touched (−1: none), its normal, the impact speed there)."""
         killed, hits, which = 0, 0, -1
         n_hit = ti.Vector([0.0, 1.0, 0.0], dt=self.dtype)
         speed = ti.cast(0.0, self.dtype)
         zero = ti.Vector.zero(self.dtype, 3)
         for k in ti.static(range(self.count)):
-            g, _gd, _N = self.contact(k, x, v, 0.0)
+            g, _gd, N = self.contact(k, x, v, 0.0)
             if g < 0.0:
                 hits += 1
                 if ti.static(self.kills[k]):
                     killed = 1
                 g0, _gd0, _N0 = self.contact(k, x0, v0, h)
                 dv = v - v0 if g0 <= self._band(x0) else zero
-                x, v, speed, n_hit = self.respond(k, x, v, 0.0, dv)
+                x, v, speed, n_hit = self._reflect(k, x, v, 0.0, dv, g, N)
                 which = k
         return x, v, hits, killed, which, n_hit, speed
+
+
+_SHARED = ("specs", "count", "dtype", "kinds", "spins", "rotating", "names", "owners", "parties", "collider_point",
+           "collider_normal", "collider_radius", "collider_vel", "collider_restitution", "collider_friction",
+           "collider_half", "collider_axis_x", "collider_axis_z", "collider_omega", "_band", "_np")
+
+
+@ti.data_oriented
+class ColliderView(Colliders):
+    """A :class:`Colliders` table as points that keep ``offset`` m from its surfaces meet it (a
+    soft body's nodes, ``offset`` its thickness: a sphere grows by it, a plane moves out along
+    its normal, a box rounds its edges by it): the table's own fields (nothing copied: a shape
+    placed in the table is placed for every view of it), a compile-time ``offset``, and
+    ``kills`` off unless ``kill`` (a ``kill`` shape ends particles, not soft bodies). Placing
+    through a view places the table."""
+
+    def __init__(self, table: Colliders, offset: float = 0.0, kill: bool = False):
+        self.table = table
+        for name in _SHARED:
+            if hasattr(table, name):
+                setattr(self, name, getattr(table, name))
+        self.offset = float(offset)
+        if not float(offset) >= 0.0:
+            raise ValueError(f"offset: must be >= 0 m, got {offset}")
+        self.kills = table.kills if kill else tuple(False for _ in table.kills)
+
+    def move_to(self, *args, **kw) -> None:
+        self.table.move_to(*args, **kw)
+
+    def follow(self, control, t0: float, t1: float) -> bool:
+        return self.table.follow(control, t0, t1)
+
+    def reset(self) -> None:
+        self.table.reset()
+
+    def pose(self, k: int) -> dict:
+        return self.table.pose(k)
+
+    def placement(self) -> bytes:
+        return self.table.placement()

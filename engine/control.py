@@ -21,6 +21,7 @@ from typing import List, Optional, Sequence
 import numpy as np
 import taichi as ti
 
+from .geometry.shapes import quat_normalize, quat_rotvec, quat_mul, spun
 from .paths import Path, sample_path
 
 
@@ -47,19 +48,38 @@ class EmitterInput:
 
 @dataclass
 class ColliderInput:
-    """One collider's position (a plane's point or a sphere's centre) over time."""
+    """One shape's pose over time: its position (a plane's point or a shape's centre) on a
+    keyframed path, and its orientation [w, x, y, z], ``orientation`` at ``orientation_time``
+    spun at the constant world ``angular_velocity`` (rad/s) before and after it. ``posed``: the
+    orientation or spin was set from code (the table then follows it at every step)."""
 
     position: tuple
     path: List[tuple] = field(default_factory=list)
     name: str = ""
+    orientation: tuple = (1.0, 0.0, 0.0, 0.0)
+    angular_velocity: tuple = (0.0, 0.0, 0.0)
+    orientation_time: float = 0.0
+    posed: bool = False
 
     def position_at(self, t: float) -> np.ndarray:
         return np.asarray(sample_path(self.path, t, self.position), np.float64)
 
+    def orientation_at(self, t: float) -> np.ndarray:
+        q = quat_normalize(self.orientation)
+        if not any(self.angular_velocity):
+            return q
+        return spun(q, self.angular_velocity, t - self.orientation_time)
+
+    @property
+    def turns(self) -> bool:
+        return self.posed or any(self.angular_velocity)
+
     @classmethod
     def from_spec(cls, spec) -> "ColliderInput":
-        """Where a :class:`~engine.colliders.ColliderSpec` starts and how its path moves it."""
-        return cls(_vec(spec.point), Path((t, _vec(p)) for t, p in spec.path), spec.name)
+        """Where a :class:`~engine.colliders.ColliderSpec` starts and how its path moves and its
+        angular velocity turns it."""
+        return cls(_vec(spec.point), Path((t, _vec(p)) for t, p in spec.path), spec.name,
+                   tuple(float(c) for c in spec.orientation), _vec(spec.angular_velocity))
 
 
 @dataclass
@@ -164,14 +184,53 @@ class Control:
         c = self.colliders[k]
         c.path = [(t_now, _vec(c.position_at(t_now))), (max(t_next, t_now + 1e-9), _vec(position))]
 
+    def set_collider_pose(self, k: int, t0: float, t1: float, position, orientation=None, velocity=None,
+                          angular_velocity=None) -> None:
+        """Shape k's pose over the step [t0, t1] (a rigid body publishing its shape each coupling
+        step, or a game steering a collider): at t1 it is at ``position`` (m) with ``orientation``
+        [w, x, y, z] (None: as it turns now). ``velocity`` (m/s): its linear velocity over the
+        step, so it was at position − velocity·(t1 − t0) at t0 (None: from where it is at t0, as
+        :meth:`move_collider`). ``angular_velocity`` (rad/s, world; None: the rotation from its
+        orientation at t0 to ``orientation`` over the step, or its spin so far when no
+        orientation is given); it keeps turning at that rate after t1 until set again. Spinning
+        needs a shape built to rotate (the table says so when the step places it)."""
+        c = self.colliders[k]
+        h = max(t1 - t0, 1e-9)
+        p1 = np.asarray(position, np.float64)
+        p0 = c.position_at(t0) if velocity is None else p1 - np.asarray(velocity, np.float64) * h
+        c.path = [(t0, _vec(p0)), (t0 + h, _vec(p1))]
+        q0 = c.orientation_at(t0)
+        if orientation is None:
+            w = c.angular_velocity if angular_velocity is None else _vec(angular_velocity)
+            c.orientation, c.orientation_time = tuple(q0.tolist()), float(t0)
+        else:
+            q1 = quat_normalize(orientation)
+            w = (_vec(angular_velocity) if angular_velocity is not None
+                 else _vec(quat_rotvec(quat_mul(q1, q0 * [1.0, -1.0, -1.0, -1.0])) / h))
+            c.orientation, c.orientation_time = tuple(q1.tolist()), float(t0 + h)
+        c.angular_velocity, c.posed = _vec(w), True
+
     @property
     def colliders_move(self) -> bool:
-        """Whether any collider follows a path (set by the config or by code)."""
-        return any(c.path for c in self.colliders)
+        """Whether any collider follows a path or turns (set by the config or by code)."""
+        return any(c.path or c.turns for c in self.colliders)
+
+    @property
+    def colliders_turn(self) -> bool:
+        """Whether any collider's orientation changes (a spin, or a pose set from code)."""
+        return any(c.turns for c in self.colliders)
 
     def collider_positions(self, t: float) -> np.ndarray:
         """(K, 3) float64 positions of every collider at time t."""
         return np.array([c.position_at(t) for c in self.colliders], np.float64).reshape(-1, 3)
+
+    def collider_orientations(self, t: float) -> np.ndarray:
+        """(K, 4) float64 orientations [w, x, y, z] of every collider at time t."""
+        return np.array([c.orientation_at(t) for c in self.colliders], np.float64).reshape(-1, 4)
+
+    def collider_omegas(self) -> np.ndarray:
+        """(K, 3) float64 angular velocities (rad/s, world) of every collider now."""
+        return np.array([c.angular_velocity for c in self.colliders], np.float64).reshape(-1, 3)
 
     # -- soft bodies ------------------------------------------------------------------------------
     def pin(self, body: int, node: int, target=None) -> None:

@@ -57,8 +57,8 @@ TABLES = {
         "color alpha size size_randomness streak",
     B0: "time count cycles interval",
     P1: "time position",
-    C0: "name restitution friction kill path visible type point normal",
-    C1: "name restitution friction kill path visible type center radius",
+    C0: "name restitution friction kill path visible angular_velocity rotates type point normal",
+    C1: "name restitution friction kill path visible angular_velocity rotates type center radius",
 }
 TABLES[E1] = TABLES[E0]
 

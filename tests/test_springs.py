@@ -227,3 +227,107 @@ def test_adaptive_lands_on_frames_and_matches_fine_rk4():
     assert multi > 0 and ada.time == pytest.approx(0.5, abs=1e-14)
     assert np.abs(ada.positions() - ref.positions()).max() < 1e-6
     assert np.abs(ada.positions() - small_chain().positions).max() > 0.05  # it really moved
+
+
+# -- force fields on the nodes (engine/forces/fields.py) -------------------------------------------------
+def _wind_scene(bodies, wind=(6.0, 0.0, 0.0), drag=0.5, fps=60):
+    from engine.config import load_config
+    from engine.scene import Scene
+    from helpers import scene_dict
+
+    d = scene_dict(fps=fps, forces={"gravity": [0.0, -9.81, 0.0], "wind": list(wind), "drag": drag},
+                   emitters=[], bodies=bodies)
+    return Scene(load_config(d), render=False)
+
+
+def _drift(v0, v_inf, k, h, n):
+    """x(nh) − x(0) of a point under a = −k (v − v∞) stepped by symplectic Euler (XPBD's predict:
+    v⁺ = v + h a, x⁺ = x + h v⁺): u = v − v∞ shrinks by (1 − kh) per step, so
+    x_n − x_0 = n h v∞ + h u₀ (1 − kh)(1 − (1 − kh)ⁿ)/(kh)."""
+    r = 1.0 - k * h
+    return n * h * v_inf + h * (v0 - v_inf) * r * (1.0 - r ** n) / (k * h)
+
+
+def test_free_cloth_in_wind_drifts_as_linear_drag_says():
+    # a free cloth of equal masses: its springs' forces cancel in the sum, so its mean velocity
+    # obeys v̄' = g − k (v̄ − w) exactly; the mean after 1 s is the scheme's closed form (and within
+    # O(h) of the ODE's: x̄ − x̄₀ = w (t − (1 − e^(−kt))/k) along the wind, the same with v∞ = −g/k down)
+    k, w, g, n, h = 0.5, 6.0, 9.81, 60, 1 / 60
+    s = _wind_scene([{"type": "cloth", "resolution": [6, 6], "size": [0.5, 0.5], "plane": "xy", "pins": "none",
+                      "integrator": "xpbd", "mass": 0.01, "stiffness": 500.0}])
+    x0 = s.bodies[0].positions().astype(np.float64).mean(axis=0)
+    for _ in range(n):
+        s.advance_frame()
+    d = s.bodies[0].positions().astype(np.float64).mean(axis=0) - x0
+    assert abs(d[0] - _drift(0.0, w, k, h, n)) < 2e-4 and abs(d[2]) < 1e-5
+    assert abs(d[1] - _drift(0.0, -g / k, k, h, n)) < 2e-4
+    t = n * h
+    assert abs(d[0] - w * (t - (1 - np.exp(-k * t)) / k)) < 0.03 * d[0]  # the ODE's, to O(h)
+
+
+def test_chain_in_wind_hangs_along_gravity_plus_drag():
+    # at rest in wind w a node feels m g + m k w: a chain from a pin hangs straight along that
+    # field, at atan(k w / g) from the vertical, downwind
+    k, w, g = 2.0, 3.0, 9.81
+    s = _wind_scene([{"type": "chain", "segments": 8, "length": 0.8, "position": [0.0, 1.0, 0.0],
+                      "integrator": "xpbd", "stiffness": 1e4, "damping": 0.02}], wind=(w, 0.0, 0.0), drag=k)
+    for _ in range(360):  # 6 s: the swing dies as e^(−kt)
+        s.advance_frame()
+    x = s.bodies[0].positions().astype(np.float64)
+    off = x[1:] - x[0]
+    angle = np.degrees(np.arctan2(off[:, 0], -off[:, 1]))
+    np.testing.assert_allclose(angle, np.degrees(np.arctan(k * w / g)), atol=0.5)
+    assert np.abs(off[:, 2]).max() < 1e-5
+
+
+def test_pinned_flag_flutters_downwind_and_no_drag_compiles_none():
+    # the issue's flag: [forces] wind = [6, 0, 0], drag = 0.5, a sheet across the wind (plane "zy")
+    # pinned along its top. From rest it is pushed at k·w = 3 m/s²: its mean moves downwind from the
+    # first frame, never as far as a free cloth's drift, and swings about the tilt at which a node
+    # at rest balances gravity and drag, tan φ = k·w/g: x̄ − x_top = (k w/g)·(y_top − ȳ), the flag
+    # swinging on its pins as a pendulum (averaged over its last second, 1.4 swings).
+    # Without drag no drag term is compiled (gravity alone: the same bytes as before).
+    k, w, g, h = 0.5, 6.0, 9.81, 1 / 60
+    flag = {"type": "cloth", "name": "flag", "resolution": [8, 8], "size": [0.6, 0.6], "plane": "zy",
+            "position": [0.0, 0.4, 0.0], "pins": "top", "integrator": "xpbd", "stiffness": 400.0}
+    s = _wind_scene([flag])
+    body = s.bodies[0]
+    assert body.system.fields.use_drag
+    x0 = body.positions().astype(np.float64)
+    top = x0[:, 1].max()
+    dx, tilt = [], []
+    for _ in range(180):
+        s.advance_frame()
+        x = body.positions().astype(np.float64)
+        dx.append(x[:, 0].mean() - x0[:, 0].mean())
+        tilt.append(k * w / g * (top - x[:, 1].mean()))
+    assert np.all(np.diff(dx[:20]) > 0)  # downwind from the start
+    assert 0.0 < max(dx[:60]) < _drift(0.0, w, k, h, 60)  # the pins hold it back
+    mean, eq = np.mean(dx[-60:]), np.mean(tilt[-60:])
+    assert abs(mean - eq) < 0.25 * eq and eq > 0.05, (mean, eq)
+    calm = _wind_scene([flag], drag=0.0)
+    assert not calm.bodies[0].system.fields.use_drag
+
+
+def test_attractors_and_vortices_pull_nodes_as_they_pull_particles():
+    # one symplectic Euler step of h from rest: v = h a(x₀) per node, with a the particles'
+    # formulas (a = s d̂/(1 + (|d|/r)²); vortex s·2q/(1 + q²) along axis × ρ̂), springs at rest
+    from types import SimpleNamespace as NS
+
+    att = NS(position=[1.0, 0.5, 0.0], strength=3.0, radius=0.7)
+    vor = NS(position=[0.0, 0.0, 0.0], axis=[0.0, 2.0, 0.0], strength=2.0, radius=0.4)
+    top = cloth(2, 2, size=(0.5, 0.3), origin=(0.2, 0.1, -0.3), mass=0.1, ks=10.0, pin="none")
+    h = 1e-3
+    sys = SpringSystem(top, integrator="symplectic_euler", gravity=NO_GRAVITY, dtype=ti.f64, substeps=1,
+                       attractors=[att], vortices=[vor], check_stability=False)
+    sys.step(h)
+    x = top.positions
+    d = np.asarray(att.position) - x
+    r = np.linalg.norm(d, axis=1, keepdims=True) + 1e-6
+    a = att.strength * (d / r) / (1 + (r / att.radius) ** 2)
+    ax = np.array([0.0, 1.0, 0.0])
+    rho_v = x - np.outer(x @ ax, ax)
+    rho = np.linalg.norm(rho_v, axis=1, keepdims=True) + 1e-6
+    q = rho / vor.radius
+    a += vor.strength * (2 * q / (1 + q * q)) * np.cross(ax, rho_v / rho)
+    np.testing.assert_allclose(sys.velocities(), h * a, rtol=1e-12, atol=1e-15)

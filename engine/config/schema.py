@@ -215,6 +215,18 @@ class _ColliderBase(Strict):
     kill: bool = False  # particles that touch it die
     path: List[Keyframe] = []
     visible: bool = True
+    # rad/s about the shape's centre (a plane's point), world axes: the surface drags what it hits
+    angular_velocity: Annotated[List[Annotated[float, Field(ge=-1e4, le=1e4)]],
+                                Field(min_length=3, max_length=3)] = [0.0, 0.0, 0.0]
+    rotates: bool = False  # compile the spinning code while angular_velocity is zero (spun from code)
+
+
+Quaternion = Annotated[List[Finite], Field(min_length=4, max_length=4)]  # [w, x, y, z], normalised
+Extent = Annotated[float, Field(gt=0, le=1e5)]
+
+
+def _check_quaternion(q):
+    return f"must not be zero, got {q}" if math.fsum(c * c for c in q) < 1e-12 else None
 
 
 class PlaneCollider(_ColliderBase):
@@ -241,7 +253,36 @@ class SphereCollider(_ColliderBase):
         return _report(self, [("path", _check_path(self.path))])
 
 
-Collider = Annotated[Union[PlaneCollider, SphereCollider], Field(discriminator="type")]
+class BoxCollider(_ColliderBase):
+    type: Literal["box"]
+    center: Vec3 = [0.0, 0.0, 0.0]
+    half_extents: Annotated[List[Extent], Field(min_length=3, max_length=3)] = [0.5, 0.5, 0.5]
+    orientation: Quaternion = [1.0, 0.0, 0.0, 0.0]
+
+    @model_validator(mode="after")
+    def _check(self):
+        return _report(self, [("orientation", _check_quaternion(self.orientation)),
+                              ("path", _check_path(self.path))])
+
+
+class CapsuleCollider(_ColliderBase):
+    """The points within ``radius`` of a segment of length 2·``half_length`` through ``center``
+    along the body y axis (turned by ``orientation``)."""
+
+    type: Literal["capsule"]
+    center: Vec3 = [0.0, 0.0, 0.0]
+    radius: Extent = 0.25
+    half_length: Annotated[float, Field(ge=0, le=1e5)] = 0.5
+    orientation: Quaternion = [1.0, 0.0, 0.0, 0.0]
+
+    @model_validator(mode="after")
+    def _check(self):
+        return _report(self, [("orientation", _check_quaternion(self.orientation)),
+                              ("path", _check_path(self.path))])
+
+
+Collider = Annotated[Union[PlaneCollider, SphereCollider, BoxCollider, CapsuleCollider],
+                     Field(discriminator="type")]
 
 
 class Turbulence(Strict):
@@ -283,7 +324,7 @@ class Body(Strict):
     chain: ``segments`` + 1 nodes from ``position`` along ``direction`` over ``length``.
     hair: ``strands`` strands of ``segments`` from roots on a scalp cap (centre ``position``,
     ``radius``, ``cap_angle``) or a line (``position`` → ``line_end``). cloth: a
-    ``resolution = [nx, ny]`` grid of ``size = [w, d]`` in ``plane`` "xz" (flat) or "xy" (hanging)
+    ``resolution = [nx, ny]`` grid of ``size = [w, d]`` in ``plane`` "xz" (flat), "xy" or "zy" (hanging)
     from ``position``. jelly: a ``resolution = [nx, ny, nz]`` lattice of ``size = [x, y, z]``.
     Stiffness in N/m, damping in N·s/m, mass per node in kg."""
 
@@ -300,7 +341,7 @@ class Body(Strict):
     line_end: Vec3 = [1.0, 1.0, 0.0]
     resolution: Annotated[List[Annotated[int, Field(ge=2, le=512)]], Field(min_length=2, max_length=3)] = [16, 16]
     size: Annotated[List[Positive], Field(min_length=2, max_length=3)] = [1.0, 1.0]
-    plane: Literal["xz", "xy"] = "xz"
+    plane: Literal["xz", "xy", "zy"] = "xz"
     mass: Annotated[float, Field(gt=0, le=1e3)] = 0.01
     stiffness: Annotated[float, Field(gt=0, le=1e9)] = 1e3
     damping: NonNeg = 0.0

@@ -1,2 +1,12 @@
-"""Geometry shared by every system: the deterministic neighbour grid (:mod:`.grid`) and its
-Taichi-free size estimate (:mod:`.sizing`, what the config checks before anything is allocated)."""
+"""Geometry shared by every kind of physics: shapes (plane, sphere, box, capsule) with their signed
+distance, closest point, outward normal and mass properties, and poses that translate and rotate
+(:mod:`.shapes`); the deterministic neighbour grid (:mod:`.grid`) and its Taichi-free size
+estimate (:mod:`.sizing`, what the config checks before anything is allocated).
+
+Imports no physics room (particles, springs, rigid): the shape table (:mod:`engine.colliders`),
+the interacting particles and the rigid bodies build on it."""
+from .shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, inertia, quat_from_rotvec, quat_mul, quat_normalize,
+                     quat_rotvec, quat_to_matrix, closest_point, signed_distance)
+
+__all__ = ["BOX", "CAPSULE", "KINDS", "PLANE", "SPHERE", "inertia", "quat_from_rotvec", "quat_mul",
+           "quat_normalize", "quat_rotvec", "quat_to_matrix", "closest_point", "signed_distance"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
+from ..forces.fields import attractor_accel, vortex_accel
 from .noise import curl_noise
 
 
@@ -151,9 +152,7 @@ class Forces:
             def attractors(x, v, age, t, i):
                 a = ti.Vector([0.0, 0.0, 0.0])
                 for k in ti.static(range(na)):
-                    d = apos[k] - x
-                    r = d.norm() + 1e-6
-                    a += astr[k] * (d / r) / (1.0 + (r / arad[k]) ** 2)
+                    a += attractor_accel(x, apos[k], astr[k], arad[k])  # (engine.forces.fields: nodes' too)
                 return a
 
             available["attractors"] = attractors
@@ -165,11 +164,7 @@ class Forces:
             def vortices(x, v, age, t, i):
                 a = ti.Vector([0.0, 0.0, 0.0])
                 for k in ti.static(range(nv)):
-                    d = x - vpos[k]
-                    rho_v = d - d.dot(vax[k]) * vax[k]  # from the axis, perpendicular to it
-                    rho = rho_v.norm() + 1e-6
-                    q = rho / vrad[k]
-                    a += vstr[k] * (2.0 * q / (1.0 + q * q)) * vax[k].cross(rho_v / rho)
+                    a += vortex_accel(x, vpos[k], vax[k], vstr[k], vrad[k])
                 return a
 
             available["vortices"] = vortices

@@ -141,7 +141,7 @@ class ParticleIntegrator:
                     ti.atomic_add(self.hits[None], 1)
                     if ti.static(self.record):
                         # any thread order: the drain sorts by (time, slot)
-                        self.contact_log.record(i, k, xh, nh, speed, t_end - lag)
+                        self.contact_log.record(i, k, xh, nh, speed, t_end - lag, S.particle_emitter[i])
                     if ti.static(self.events):
                         S.particle_event[i] |= 2
                         S.particle_impact[i] = dv

@@ -76,23 +76,6 @@ class ParticleSystem(SystemBase):
         self._alive = None  # the live count, read back when first asked after an advance
         self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
 
-    def receive(self, coupling) -> None:
-        """Rigid bodies' shapes published on the board move the sphere colliders named after
-        them (a moving collider from its pose at the coupling step's start to its end: particles
-        bounce off a rolling ball, its velocity inferred). Other shapes: the shape table's work."""
-        for _pub, shapes in coupling.get("rigid_shapes"):
-            for sh in shapes:
-                k = self._rigid_colliders.get(sh["name"])
-                if k is not None:
-                    self.control.move_collider(k, coupling.t0, coupling.t1, sh["position"])
-
-    @property
-    def _rigid_colliders(self) -> dict:
-        """{rigid body name: index of its sphere collider}."""
-        if not hasattr(self, "_rigid_index"):
-            self._rigid_index = {s.name: k for k, s in enumerate(self.colliders.specs) if getattr(s, "rigid", False)}
-        return self._rigid_index
-
     def advance(self, t0: float, t1: float) -> None:
         """Advance from t0 to exactly t1 (the System protocol, engine.scene.system). Contact
         records accumulate until :meth:`contacts` drains them."""
@@ -102,12 +85,9 @@ class ParticleSystem(SystemBase):
     # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
     def _move_colliders(self, t: float, t_end: float) -> bool:
         """Put moving colliders where the control says they are at t_end, moving since t (the
-        step's start); whether any moves."""
-        moving = bool(self.colliders.count) and self.control.colliders_move
-        if moving:
-            ctl = self.control
-            self.colliders.move_to(t_end, ctl.collider_positions(t_end), since=(t, ctl.collider_positions(t)))
-        return moving
+        step's start); whether any moves (the one shape table: soft bodies place it at their own
+        steps' times the same way)."""
+        return self.colliders.follow(self.control, t, t_end)
 
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
         """Step j of h from t0 (step m starts at t0 + m·h); then, while nothing has to happen
@@ -230,13 +210,18 @@ class ParticleSystem(SystemBase):
     def dropped(self) -> int:
         return int(self.emitters.dropped_counts().sum())
 
-    def contacts(self, names=()):
+    def contacts(self, names=(), shapes=()):
         """Every contact recorded since the previous call (:class:`~engine.contacts.Contacts`,
-        sorted by time then pool slot; ``dropped``: those that did not fit the buffer); drains."""
+        sorted by time then pool slot; ``dropped``: those that did not fit the buffer); drains.
+        ``names``, ``shapes``: the shape table's (default: this system's table's); each row names
+        the particle's emitter."""
         I = self.integrator
+        if not names and not shapes and self.colliders is not None:
+            names, shapes = self.colliders.names, self.colliders.parties
+        emitters = tuple(e.name for e in self.cfg.emitters)
         if not I.record:
-            return Contacts.empty(names)
-        return I.contact_log.drain(names)
+            return Contacts.empty(names, kind="particle", group_names=emitters, shapes=shapes)
+        return I.contact_log.drain(names, emitters, shapes)
 
     def carry_from(self, old: "ParticleSystem") -> None:
         """Copy each named emitter's ring (particles, head, serial, clock) from ``old`` (the same

@@ -1,5 +1,6 @@
 """The opaque background a frame is composited over: a sky gradient, faint 1 m grids on plane
-colliders (or on the ground when there are none) and faintly lit collider spheres, with the depth
+colliders (or on the ground when there are none) and faintly lit collider spheres, boxes and
+capsules, with the depth
 particles are tested against (a particle behind a sphere is hidden; near a surface it fades).
 
 Drawn only when the camera, the colliders or the image size change; between such frames the
@@ -9,7 +10,7 @@ renderer keeps it, its reduced-resolution depth and its tone-mapped packed copy.
 
 import taichi as ti
 
-from ..colliders import PLANE
+from ..colliders import BOX, CAPSULE, PLANE, SPHERE
 
 vec3 = ti.types.vector(3, ti.f32)
 ND_V4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.f32), ndim=1)  # pixel arrays: flat, y·W + x
@@ -51,6 +52,87 @@ def grid_shade(o, d, p0, n, th, f, col, zbest, H):
     return col, z
 
 
+@ti.func
+def solid_shade(n, d):
+    """A collider solid's colour at outward normal n seen along d: faint key light and rim."""
+    ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
+    lam = ti.max(0.0, n.dot(ldir))
+    rim = 1.0 - ti.abs(n.dot(d))
+    return ti.Vector([0.02, 0.021, 0.025]) + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) + 0.03 * rim * rim * rim
+
+
+@ti.func
+def ray_box(o, d, c, ex, ey, ez, h):
+    """(s, n): the ray o + s·d's entry into the box (centre c, axes ex, ey, ez, half extents h),
+    s < 0 when it misses or starts inside; n the outward normal there (slab method)."""
+    oc = o - c
+    ol = ti.Vector([oc.dot(ex), oc.dot(ey), oc.dot(ez)])
+    dl = ti.Vector([d.dot(ex), d.dot(ey), d.dot(ez)])
+    tn, tf = -1e30, 1e30
+    nl = ti.Vector([0.0, 0.0, 0.0])
+    for a in ti.static(range(3)):
+        if ti.abs(dl[a]) < 1e-12:
+            if ti.abs(ol[a]) > h[a]:
+                tn, tf = 1.0, -1.0  # parallel to this slab and outside it: no hit
+        else:
+            t1 = (-h[a] - ol[a]) / dl[a]
+            t2 = (h[a] - ol[a]) / dl[a]
+            lo, hi = ti.min(t1, t2), ti.max(t1, t2)
+            if lo > tn:
+                tn = lo
+                nl = ti.Vector([0.0, 0.0, 0.0])
+                nl[a] = -1.0 if dl[a] > 0 else 1.0
+            tf = ti.min(tf, hi)
+    s = -1.0
+    if tn <= tf and tn > 0:
+        s = tn
+    return s, nl[0] * ex + nl[1] * ey + nl[2] * ez
+
+
+@ti.func
+def ray_capsule(o, d, c, a, half, rad):
+    """(s, n): the ray o + s·d's entry into the capsule (segment c ± half·a, radius rad), s < 0 on
+    a miss (Quilez's capsule intersection: the infinite cylinder, then the nearer end cap)."""
+    pa = c - half * a
+    ba = 2.0 * half * a
+    oa = o - pa
+    baba = ba.dot(ba)
+    bard = ba.dot(d)
+    baoa = ba.dot(oa)
+    rdoa = d.dot(oa)
+    oaoa = oa.dot(oa)
+    s = -1.0
+    qa = baba - bard * bard
+    qb = baba * rdoa - baoa * bard
+    qc = baba * oaoa - baoa * baoa - rad * rad * baba
+    hh = qb * qb - qa * qc
+    if hh >= 0.0 and qa > 1e-12:
+        t = (-qb - ti.sqrt(hh)) / qa
+        y = baoa + t * bard
+        if y > 0.0 and y < baba:
+            s = t
+        else:  # the end caps
+            oc = oa if y <= 0.0 else o - (c + half * a)
+            bb = d.dot(oc)
+            cc = oc.dot(oc) - rad * rad
+            h2 = bb * bb - cc
+            if h2 > 0.0:
+                s = -bb - ti.sqrt(h2)
+    elif qa <= 1e-12:  # looking along the axis (or a zero-length segment): the nearer cap
+        oc = oa if bard > 0.0 else o - (c + half * a)
+        bb = d.dot(oc)
+        cc = oc.dot(oc) - rad * rad
+        h2 = bb * bb - cc
+        if h2 > 0.0:
+            s = -bb - ti.sqrt(h2)
+    n = ti.Vector([0.0, 1.0, 0.0])
+    if s > 0.0:
+        p = o + s * d
+        r = p - c
+        n = (r - ti.min(ti.max(r.dot(a), -half), half) * a).normalized()
+    return s, n
+
+
 def build_background_kernel(render_cfg, colliders):
     """``background(bgc, depth, o, f, r, u, th, W, H, show)``: bgc (H·W,) vec4 = (RGB, 0), depth
     (H·W,) f32 metres along the view axis (SKY_DEPTH where nothing is hit). ``show`` 0 hides the
@@ -59,12 +141,17 @@ def build_background_kernel(render_cfg, colliders):
     specs = colliders.specs if colliders is not None else []
     vis = [k for k, s in enumerate(specs) if s.visible]
     planes = tuple(k for k in vis if colliders.kinds[k] == PLANE)
-    spheres = tuple(k for k in vis if colliders.kinds[k] != PLANE)
+    spheres = tuple(k for k in vis if colliders.kinds[k] == SPHERE)
+    boxes = tuple(k for k in vis if colliders.kinds[k] == BOX)
+    capsules = tuple(k for k in vis if colliders.kinds[k] == CAPSULE)
     grid = bool(render_cfg.grid)
     if colliders is not None:
         cpt, cnr, crad = colliders.collider_point, colliders.collider_normal, colliders.collider_radius
+        chalf = getattr(colliders, "collider_half", None)
+        cax = getattr(colliders, "collider_axis_x", None)
+        caz = getattr(colliders, "collider_axis_z", None)
     else:
-        cpt = cnr = crad = None
+        cpt = cnr = crad = chalf = cax = caz = None
 
     @ti.kernel
     def background(out: ND_V4, depth: ND_F, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32,
@@ -100,6 +187,16 @@ def build_background_kernel(render_cfg, colliders):
                                 col = ti.Vector([0.02, 0.021, 0.025]) \
                                     + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) + 0.03 * rim * rim * rim
                                 z = zz
+                    for k in ti.static(boxes):
+                        s, n = ray_box(o, d, cpt[k], cax[k], cnr[k], caz[k], chalf[k])
+                        zz = s * d.dot(f)
+                        if s > 0 and zz < z:
+                            col, z = solid_shade(n, d), zz
+                    for k in ti.static(capsules):
+                        s, n = ray_capsule(o, d, cpt[k], cnr[k], chalf[k][1], crad[k])
+                        zz = s * d.dot(f)
+                        if s > 0 and zz < z:
+                            col, z = solid_shade(n, d), zz
                 out[py * W + px] = ti.Vector([col[0], col[1], col[2], 0.0])
                 depth[py * W + px] = z
 

@@ -30,16 +30,18 @@ SLOP = 0.005  # m: contacts are kept this far apart before touching (and a step'
 class RigidSystem(SystemBase):
     kind = "rigid"
 
-    def __init__(self, cfg, collider_specs, control, name: str = "rigid"):
+    def __init__(self, cfg, collider_specs, control, name: str = "rigid", shape_index=None):
         """``cfg``: the scene config (its ``rigid_bodies``, ``joints``, ``rigid``);
         ``collider_specs``: the scene's planes and spheres (static shapes for the bodies);
-        ``control``: the scene's inputs (gravity, collider positions)."""
+        ``control``: the scene's inputs (gravity, collider positions); ``shape_index``: {body
+        index: its shape's index in the scene's shape table}, posed at every coupling step."""
         self.name, self.cfg, self.settings = name, cfg, cfg.rigid
         self.bodies_cfg = list(cfg.rigid_bodies)
         self.model = RigidModel(self.bodies_cfg)
         self.state = RigidState.from_config(self.bodies_cfg)
         self.specs = list(collider_specs)
         self.control = control
+        self.shape_index = dict(shape_index or {})
         self.joints = Joints(cfg.joints, self.model, self.state) if cfg.joints else None
         self.stats = DriverStats()
         self.method = self.settings.integrator
@@ -122,7 +124,14 @@ class RigidSystem(SystemBase):
     def publish(self, coupling) -> None:
         """The bodies' shapes at the step's end, for particles and soft bodies (sphere, box and
         capsule poses with their velocities)."""
-        coupling.put(self.name, "rigid_shapes", self.shapes())
+        shapes = self.shapes()
+        coupling.put(self.name, "rigid_shapes", shapes)
+        for i, sh in enumerate(shapes):  # the bodies' shapes in the one shape table: their pose over the step
+            k = self.shape_index.get(i)
+            if k is not None:
+                # spheres sit in the table unrotated (their contact is the same at any orientation;
+                # ω × r friction from a spinning ball is left out: spinning code costs compile time)
+                self.control.set_collider_pose(k, coupling.t0, coupling.t1, sh["position"], None, sh["velocity"])
 
     def shapes(self) -> list:
         S, m = self.state, self.model

@@ -41,20 +41,31 @@ def collider_specs(cfg_colliders):
     out = []
     for c in cfg_colliders:
         common = dict(restitution=c.restitution, friction=c.friction, kill=c.kill, name=c.name,
-                      path=Path((k.time, k.position) for k in c.path), visible=c.visible)
+                      path=Path((k.time, k.position) for k in c.path), visible=c.visible,
+                      angular_velocity=tuple(c.angular_velocity), rotates=c.rotates)
         if c.type == "plane":
             out.append(ColliderSpec("plane", point=c.point, normal=c.normal, **common))
-        else:
+        elif c.type == "sphere":
             out.append(ColliderSpec("sphere", point=c.center, radius=c.radius, **common))
+        elif c.type == "box":
+            out.append(ColliderSpec("box", point=c.center, half_extents=tuple(c.half_extents),
+                                    orientation=tuple(c.orientation), **common))
+        else:
+            out.append(ColliderSpec("capsule", point=c.center, radius=c.radius, half_length=c.half_length,
+                                    orientation=tuple(c.orientation), **common))
     return out
 
 
-def rigid_sphere_specs(cfg):
-    """A moving sphere collider for particles per rigid sphere, named after the body and moved
-    to its pose at every coupling step (ParticleSystem.receive); not drawn (the body is)."""
+def rigid_shape_specs(cfg):
+    """Rigid spheres in the one shape table (after the config's colliders), named after the body,
+    ``owner`` "rigid", not drawn (the body is); RigidSystem.publish moves each to its body's pose
+    at every coupling step, so particles and spring nodes meet it where it is (v + ω × r at the
+    contact). Boxes and capsules stay out for now: the table unrolls each spinning shape's
+    located-impact code into the particles' fused step (about 11 sites per shape), and ten
+    spinning crates compiled for over three minutes before the first frame."""
     return [ColliderSpec("sphere", point=b.position, radius=b.radius, restitution=b.restitution,
-                         friction=b.friction, name=b.name, visible=False, rigid=True)
-            for b in cfg.rigid_bodies if b.shape == "sphere"]
+                         friction=b.friction, name=b.name, visible=False, owner="rigid", owner_index=i)
+            for i, b in enumerate(cfg.rigid_bodies) if b.shape == "sphere"]
 
 
 class Scene:
@@ -78,8 +89,13 @@ class Scene:
         self.frame_dt = 1.0 / cfg.fps
         self.stats = Stats()
         specs = collider_specs(cfg.colliders)
-        every = specs + rigid_sphere_specs(cfg) if cfg.emitters else specs  # particles' colliders
-        self.colliders = Colliders(every)
+        every = specs + rigid_shape_specs(cfg)  # the scene's shapes, then the rigid bodies' own
+        same_colliders = (previous is not None and previous.cfg.colliders == cfg.colliders
+                          and rigid_shape_specs(previous.cfg) == rigid_shape_specs(cfg))
+        # the one shape table: particles read it, soft bodies through their thickness (a kept
+        # body's kernels were compiled against the previous scene's table, so an unchanged
+        # table is kept with them); rigid bodies publish their poses into it (RigidSystem.publish)
+        self.colliders = previous.colliders if same_colliders else Colliders(every)
         if previous is None:
             self.control = Control.for_scene(cfg, every)
         else:
@@ -93,20 +109,24 @@ class Scene:
         if cfg.bodies:
             from ..bodies import SoftBody
 
-            same_colliders = previous is not None and previous.cfg.colliders == cfg.colliders
-            keep = {b.cfg.name: b for b in (previous.bodies if same_colliders else []) if b.cfg.name}
+            f0, f1 = (previous.cfg.forces if previous is not None else None), cfg.forces
+            same_drag = f0 is not None and (f0.drag, f0.attractors, f0.vortices) == (f1.drag, f1.attractors,
+                                                                                 f1.vortices)  # compiled in
+            keep = {b.cfg.name: b for b in (previous.bodies if same_colliders and same_drag else []) if b.cfg.name}
             for k, b in enumerate(cfg.bodies):
                 old = keep.get(b.name) if b.name else None
                 if old is not None and old.cfg == b and old.index == k:  # kept, compiled kernels and all
                     old.use_control(self.control)
                     self.bodies.append(old)
                 else:
-                    self.bodies.append(SoftBody(b, specs, self.control, cfg.solver.integrator, k, contacts))
+                    self.bodies.append(SoftBody(b, self.colliders, self.control, cfg.solver.integrator, k, contacts,
+                                               cfg.forces))
         self.rigid = None
         if cfg.rigid_bodies:
             from ..rigid import RigidSystem
 
-            self.rigid = RigidSystem(cfg, specs, self.control)
+            self.rigid = RigidSystem(cfg, specs, self.control,
+                                     shape_index={s.owner_index: k for k, s in enumerate(every) if s.owner == "rigid"})
             if previous is not None and previous.rigid is not None:
                 self.rigid.carry_from(previous.rigid)
         self.coupler = Coupler(([self.particles] if self.particles is not None else []) + self.bodies

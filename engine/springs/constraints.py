@@ -97,7 +97,7 @@ def finalize(model: ti.template(), state: ti.template(), contacts: ti.template()
                     x = ti.cast(xs, model.dtype)
                     v = ti.cast(vs, model.dtype)
                     if ti.static(log.enabled):
-                        log.record(i, which, xh, ti.cast(nh, ti.f32), ti.cast(speed, ti.f32), t_end - lag)
+                        log.record(i, which, xh, ti.cast(nh, ti.f32), ti.cast(speed, ti.f32), t_end - lag, 0)
         if not is_finite(x.sum() + v.sum()):
             ti.atomic_min(bad_t[None], t_end)
         X[i] = x

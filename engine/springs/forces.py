@@ -10,9 +10,12 @@ acceleration, not even gravity.
   summation order depends on thread timing, so the last bits may differ between runs.
 
 Both kernels write ``A[j, i]`` (j selects an evaluation slot of the stepper) for the state held in
-the fields X, V; ``gravity`` is the control's 0-d field.
+the fields X, V; ``fields`` is the scene's :class:`~engine.forces.fields.PointForces` (gravity,
+and drag toward the wind when the scene has drag: ``fields.external``, added to free nodes only).
 """
 import taichi as ti
+
+from ..forces.fields import PointForces
 
 ACCUMULATORS = ("gather", "atomic")
 
@@ -32,9 +35,9 @@ def spring_force(model: ti.template(), X: ti.template(), V: ti.template(), s):
 
 
 @ti.kernel
-def accel_gather(model: ti.template(), gravity: ti.template(), X: ti.template(), V: ti.template(),
+def accel_gather(model: ti.template(), fields: ti.template(), X: ti.template(), V: ti.template(),
                  A: ti.template(), j: ti.i32):
-    g = ti.cast(gravity[None], model.dtype)
+    g = ti.cast(fields.gravity[None], model.dtype)
     off, adj, sign = ti.static(model.adj_offset, model.adj_spring, model.adj_sign)
     for i in range(model.node_count):
         f = ti.Vector.zero(model.dtype, 3)
@@ -43,19 +46,19 @@ def accel_gather(model: ti.template(), gravity: ti.template(), X: ti.template(),
         w = model.node_inv_mass[i]
         acc = w * f
         if w > 0:
-            acc += g
+            acc += fields.external(g, X[i], V[i])
         A[j, i] = acc
 
 
 @ti.kernel
-def accel_atomic(model: ti.template(), gravity: ti.template(), X: ti.template(), V: ti.template(),
+def accel_atomic(model: ti.template(), fields: ti.template(), X: ti.template(), V: ti.template(),
                  A: ti.template(), j: ti.i32):
-    g = ti.cast(gravity[None], model.dtype)
+    g = ti.cast(fields.gravity[None], model.dtype)
     w = ti.static(model.node_inv_mass)
     for i in range(model.node_count):
         acc = ti.Vector.zero(model.dtype, 3)
         if w[i] > 0:
-            acc = g
+            acc = fields.external(g, X[i], V[i])
         A[j, i] = acc
     for s in range(model.spring_count):
         f = spring_force(model, X, V, s)
@@ -64,15 +67,18 @@ def accel_atomic(model: ti.template(), gravity: ti.template(), X: ti.template(),
         A[j, b] -= w[b] * f
 
 
-def accel_launcher(model, gravity, accumulate: str = "gather"):
+def accel_launcher(model, fields, accumulate: str = "gather"):
     """``accel(X, V, A, j)`` for the staged steppers (engine.ode.staged); nothing to do for an
-    empty network."""
+    empty network. ``fields``: :class:`~engine.forces.fields.PointForces` (a bare 0-d gravity
+    field, as callers passed before force fields reached the nodes, is gravity alone)."""
+    if not isinstance(fields, PointForces):
+        fields = PointForces(fields, dtype=model.dtype)
     if accumulate not in ACCUMULATORS:
         raise ValueError(f"accumulate: unknown value {accumulate!r}; allowed: {', '.join(ACCUMULATORS)}")
     kernel = accel_gather if accumulate == "gather" else accel_atomic
 
     def accel(X, V, A, j):
         if model.node_count:
-            kernel(model, gravity, X, V, A, j)
+            kernel(model, fields, X, V, A, j)
 
     return accel

@@ -21,6 +21,7 @@ import taichi as ti
 
 from ..contacts import ContactBuffer
 from ..control import ColliderInput, Control
+from ..forces.fields import PointForces
 from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
 from ..ode.staged import FieldStepper, StagedDoubling, copy_nodes
@@ -44,9 +45,13 @@ class SpringSystem:
                  tol: float = 1e-4, rtol=None, atol=None, accumulate: str = "gather",
                  xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 2,
                  check_stability: bool = True, dtype=ti.f32, record_energy: bool = False,
-                 control: Control = None, name: str = "", contacts: int = 0, self_collision: float = 0.0):
-        """``control``: the scene's inputs (gravity, collider positions); without one the system
-        has its own, with ``gravity`` and the colliders' own paths. ``name`` prefixes messages.
+                 control: Control = None, name: str = "", contacts: int = 0, drag: float = 0.0, wind=None,
+                 attractors=(), vortices=(), self_collision: float = 0.0):
+        """``control``: the scene's inputs (gravity, wind, collider poses); without one the system
+        has its own, with ``gravity``, ``wind`` (m/s) and the colliders' own paths. ``drag``: linear
+        drag toward the wind, k in 1/s (a = −k (v − wind) on every free node; 0: not compiled,
+        gravity alone); ``attractors``, ``vortices``: the config's ``[forces]`` lists, pulling the
+        nodes as they pull particles. ``name`` prefixes messages.
         ``contacts``: keep up to this many node–collider contact records between drains
         (:meth:`contacts`; 0: none, and no recording is compiled). ``self_collision``: a thickness
         > 0 keeps nodes that no spring joins 2 × that apart (engine.springs.self_collision, through
@@ -69,18 +74,23 @@ class SpringSystem:
         self.check_stability, self.record_energy = check_stability, record_energy
         if control is None:  # standalone: its own inputs, the colliders following their specs' paths
             specs = colliders.specs if colliders is not None else ()
-            control = Control(gravity, colliders=[ColliderInput.from_spec(s) for s in specs], dtype=dtype)
+            control = Control(gravity, (0.0, 0.0, 0.0) if wind is None else wind,
+                              colliders=[ColliderInput.from_spec(s) for s in specs], dtype=dtype)
+        elif wind is not None:
+            control.set_wind(wind)
         self.control = control
         self.gravity = self.control.gravity
+        # the force fields on the nodes (engine.forces.fields): gravity, drag toward the wind
+        self.fields = PointForces(self.control.gravity, self.control.wind, drag, dtype, attractors, vortices)
         self.model = SpringModel(topology, dtype)
         self.state = SpringState(topology.node_count, dtype)
         self.set_positions(topology.positions)
         self.set_velocities(np.zeros_like(topology.positions))
         n = topology.node_count
         if integrator == "xpbd":
-            self.stepper = XPBDStepper(self.model, self.state, self.gravity, xpbd_iterations)
+            self.stepper = XPBDStepper(self.model, self.state, self.fields, xpbd_iterations)
         else:
-            self.accel = accel_launcher(self.model, self.gravity, accumulate)
+            self.accel = accel_launcher(self.model, self.fields, accumulate)
             self.stepper = FieldStepper(integrator, self.state.node_pos, self.state.node_vel, n, self.accel)
         self.order = self.stepper.order
         self.colliders = colliders
@@ -88,7 +98,7 @@ class SpringSystem:
         if self._contacts.on:  # the start of each step, for locating impacts in it
             self._x0 = ti.Vector.field(3, dtype, max(1, n))
             self._v0 = ti.Vector.field(3, dtype, max(1, n))
-        self.contact_log = ContactBuffer(contacts if self._contacts.on else 0)
+        self.contact_log = ContactBuffer(contacts if self._contacts.on else 0, kind="node")
         self._bad = ti.field(ti.f64, ())
         self._bad[None] = constraints.NO_FAILURE
         self._self = None
@@ -159,10 +169,8 @@ class SpringSystem:
             self._self.apply(h)
         if self._limits is not None:
             self._limits.apply(self.max_stretch, self.limit_iterations)
-        if self._contacts.on and self.control.colliders_move:
-            ctl = self.control
-            self.colliders.move_to(t_end, ctl.collider_positions(t_end),
-                                   since=(t_end - h, ctl.collider_positions(t_end - h)))
+        if self._contacts.on:  # the shared table placed at this step's end (engine.colliders)
+            self.colliders.follow(self.control, t_end - h, t_end)
         constraints.finalize(self.model, self.state, self._contacts, x0, v0, self._bad,
                              self._alpha(t_end), t_end, h, self.contact_log)
 

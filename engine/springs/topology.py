@@ -154,13 +154,14 @@ def cloth(nx: int, ny: int, size=(1.0, 1.0), origin=(0.0, 0.0, 0.0), plane: str 
           mass: float = 0.01, ks: float = 1e4, kd: float = 0.0, shear_ks=None, bend_ks=None,
           shear_kd=None, bend_kd=None, pin="none") -> Topology:
     """An nx × ny grid, node j*nx + i at origin + i·dx·u + j·dy·w with (u, w) = (x, z) for
-    ``plane="xz"`` (horizontal) or (x, y) for ``"xy"`` (hanging). Structural springs to the 4
+    ``plane="xz"`` (horizontal), (x, y) for ``"xy"`` (hanging, facing z) or (z, y) for ``"zy"``
+    (hanging, facing x: a flag across a wind along x). Structural springs to the 4
     neighbours, shear to the diagonals, bend to the second neighbours (shear/bend stiffness default
     to ks and ks/10). ``pin``: "none", "corners" (the two corners of row ny−1), "top" (row ny−1) or
     a list of node indices."""
     if nx < 2 or ny < 2:
         raise ValueError("cloth: nx and ny must be >= 2")
-    u, w = {"xz": ((1, 0, 0), (0, 0, 1)), "xy": ((1, 0, 0), (0, 1, 0))}[plane]
+    u, w = {"xz": ((1, 0, 0), (0, 0, 1)), "xy": ((1, 0, 0), (0, 1, 0)), "zy": ((0, 0, 1), (0, 1, 0))}[plane]
     jj, ii = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
     fi, fj = (ii / (nx - 1) * size[0]).ravel(), (jj / (ny - 1) * size[1]).ravel()
     pos = np.asarray(origin, np.float64) + fi[:, None] * np.asarray(u, float) + fj[:, None] * np.asarray(w, float)

@@ -3,7 +3,7 @@
 Each spring is a distance constraint C = |x_a − x_b| − r with compliance α = 1/ks; per step of h
 α̃ = α/h², and spring damping kd enters as the paper's β: γ = α̃·(h²β)/h = kd/(ks·h). Per step:
 
-    v += h g (free nodes); x_prev = x; x += h v; λ = 0
+    v += h a_ext (free nodes: gravity, drag toward the wind); x_prev = x; x += h v; λ = 0
     repeat `iterations` times, colour by colour (Gauss–Seidel, race-free, deterministic):
         Δλ = (−C − α̃λ − γ ∇C·(x − x_prev)) / ((1 + γ)(w_a + w_b) + α̃)
         λ += Δλ;  x_a += w_a Δλ n;  x_b −= w_b Δλ n          (n = (x_a − x_b)/|x_a − x_b|)
@@ -14,17 +14,19 @@ than ks (sagging), never exploding. Springs with ks = 0 are skipped.
 """
 import taichi as ti
 
+from ..forces.fields import PointForces
+
 
 @ti.kernel
-def _predict(model: ti.template(), state: ti.template(), gravity: ti.template(), x_prev: ti.template(),
+def _predict(model: ti.template(), state: ti.template(), fields: ti.template(), x_prev: ti.template(),
              lam: ti.template(), h: ti.f64):
     X, V, w = ti.static(state.node_pos, state.node_vel, model.node_inv_mass)
     hh = ti.cast(h, model.dtype)
-    g = ti.cast(gravity[None], model.dtype)
+    g = ti.cast(fields.gravity[None], model.dtype)
     for i in range(model.node_count):
         v = V[i]
         if w[i] > 0:
-            v += hh * g
+            v += hh * fields.external(g, X[i], v)  # gravity (and drag toward the wind)
         V[i] = v
         x_prev[i] = X[i]
         X[i] += hh * v
@@ -72,9 +74,13 @@ class XPBDStepper:
     order = 1
     fevals = 1
 
-    def __init__(self, model, state, gravity, iterations: int = 10):
+    def __init__(self, model, state, fields, iterations: int = 10):
+        """``fields``: :class:`~engine.forces.fields.PointForces` (gravity, drag, wind; a bare 0-d
+        gravity field is gravity alone)."""
+        if not isinstance(fields, PointForces):
+            fields = PointForces(fields, dtype=model.dtype)
         dtype, N, M = model.dtype, max(1, model.node_count), max(1, model.spring_count)
-        self.model, self.state, self.gravity, self.iterations = model, state, gravity, int(iterations)
+        self.model, self.state, self.fields, self.iterations = model, state, fields, int(iterations)
         self.x_prev = ti.Vector.field(3, dtype, N)
         self.lam = ti.field(dtype, M)
 
@@ -82,7 +88,7 @@ class XPBDStepper:
         m, s = self.model, self.state
         if m.node_count == 0:
             return
-        _predict(m, s, self.gravity, self.x_prev, self.lam, h)
+        _predict(m, s, self.fields, self.x_prev, self.lam, h)
         for _ in range(self.iterations):
             for lo, hi in m.color_ranges:
                 _project_color(m, s, self.x_prev, self.lam, lo, hi, h)
