@@ -12,8 +12,8 @@ from .energy import write_energy_csv
 from .stability import StiffnessError
 from .system import INTEGRATORS, SimulationDiverged, SpringSystem
 from .topology import (BEND, BODY, SHEAR, STRUCTURAL, Topology, chain, cloth, hair, jelly, line_roots,
-                       merge, scalp_roots)
+                       merge, scalp_roots, solid)
 
 __all__ = ["SpringSystem", "SimulationDiverged", "StiffnessError", "INTEGRATORS", "Topology", "chain",
-           "hair", "cloth", "jelly", "merge", "line_roots", "scalp_roots", "write_energy_csv",
+           "hair", "cloth", "jelly", "merge", "solid", "line_roots", "scalp_roots", "write_energy_csv",
            "STRUCTURAL", "SHEAR", "BEND", "BODY"]
