@@ -261,14 +261,22 @@ def test_solid_frames_are_byte_identical_on_one_and_two_threads(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["jelly_solid", "cloth_bending"])
-@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet", "rk4", "xpbd"])
-def test_energy_configs_run_under_each_integrator(name, integrator):
+@pytest.mark.parametrize("integrator", ["euler", "midpoint", "rk4", "symplectic_euler", "verlet", "xpbd"])
+def test_energy_configs_run_their_whole_duration_under_each_integrator(name, integrator):
+    """Each energy config runs to its end under every integrator the guard allows (explicit Euler
+    and midpoint may be refused up front, one line naming the limit: undamped bending)."""
     from engine.scene import Scene
+    from engine.springs import StiffnessError
 
     cfg = load_config(os.path.join(ROOT, "configs", f"{name}.toml"))
     for b in cfg.bodies:
         b.integrator = integrator
     s = Scene(cfg, render=False)
-    for _ in range(int(cfg.duration * cfg.fps)):
-        s.advance_frame()
-    assert np.isfinite(s.bodies[0].positions()).all()
+    try:
+        for _ in range(int(round(cfg.duration * cfg.fps))):
+            s.advance_frame()
+    except StiffnessError as e:
+        assert integrator in ("euler", "midpoint") and s.frame == 0, e
+        return
+    x = s.bodies[0].positions()
+    assert np.isfinite(x).all() and x[:, 1].min() > -0.05

@@ -8,7 +8,9 @@ optional feature and proof that an unused one compiles nothing), ``cloth`` (when
 ``engine.springs`` exists), ``output`` (``particles run``'s frame rate against sim + render),
 ``wedge`` (``particles wedge`` on local Dask workers against the same variants run one after
 another), ``api`` (the game API's level restart, memory over build/discard cycles, add_emitter, a
-new render size, the cost of its argument checks). ``quick`` uses small sizes so CI can run it in
+new render size, the cost of its argument checks), ``energy`` (a neo-Hookean solid's forces by the
+closed form against autodiff on the same tetrahedra, and configs/jelly_solid.toml per frame).
+``quick`` uses small sizes so CI can run it in
 seconds.
 """
 from __future__ import annotations
@@ -20,10 +22,10 @@ import time
 from .common import Row, format_table
 
 SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output", "wedge",
-            "api")
+            "api", "energy")
 _MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy",
             "startup": "startup", "features": "features", "cloth": "cloth", "output": "output",
-            "wedge": "wedge", "api": "api"}
+            "wedge": "wedge", "api": "api", "energy": "energy"}
 
 
 def run(quick: bool = False, only=None, echo=None, quiet: bool = True):
