@@ -126,6 +126,25 @@ def test_autodiff_spring_equals_the_hooke_force():
     assert u.check_gradient(x) < 1e-6
 
 
+@ti.func
+def _well(x, p):
+    """ψ = ½ p₀ |x − c|², c = (p₁, p₂, p₃): an external potential as a one-node energy."""
+    d = x[:, 0] - ti.Vector([p[1], p[2], p[3]])
+    return 0.5 * p[0] * d.dot(d)
+
+
+def test_external_potential_as_a_one_node_user_energy():
+    """A k = 1 user energy is a potential U(x) on every node: its force is −k (x − c) exactly."""
+    x = np.random.default_rng(2).standard_normal((5, 3))
+    p = np.array([[3.0, 0.1, -0.2, 0.3]] * 5)
+    u = UserEnergy(_well, np.arange(5)[:, None], 5, p, dtype=ti.f64, name="well")
+    X = ti.Vector.field(3, ti.f64, 5)
+    X.from_numpy(x)
+    want = -3.0 * (x - p[0, 1:])
+    assert np.abs(u.forces(X) - want).max() <= 1e-12 * np.abs(want).max()
+    assert u.energy(X) == pytest.approx(0.5 * 3.0 * np.sum((x - p[0, 1:]) ** 2), rel=1e-12)
+
+
 def test_user_energy_refuses_wrong_use():
     with pytest.raises(ValueError, match="energy: must be a @ti.func"):
         UserEnergy(lambda x, p: 0.0, [[0, 1]], 2)
@@ -148,6 +167,7 @@ def _body(**kw):
     (dict(type="cloth", resolution=[4, 4], size=[1, 1], energies=[{"type": "twist", "stiffness": 1.0}]), "type"),
     (dict(resolution=[1, 3, 3]), "resolution"), (dict(resolution=[3, 3]), "resolution"),
     (dict(type="cloth", resolution=[4, 4], size=[1, 1], energies=[{"type": "volume", "stiffness": 1.0}]), "energies"),
+    (dict(type="jelly", material={"young": 1e4}), "material"),
 ])
 def test_bad_input_is_one_line_naming_the_key(body, key):
     with pytest.raises(Exception) as err:

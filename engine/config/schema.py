@@ -344,6 +344,10 @@ class Body(Strict):
             ("pin_path", _check_path(self.pin_path)),
             ("energies", f"{wrong[0]!r} does not apply to a {self.type} (it needs "
              f"{' or '.join(_TERM_BODIES[wrong[0]])})" if wrong else None),
+            ("material", f"applies to a solid only, not a {self.type}"
+             if "material" in self.model_fields_set and self.type != "solid" else None),
+            ("density", f"applies to a solid only (a {self.type} takes mass per node)"
+             if "density" in self.model_fields_set and self.type != "solid" else None),
         ])
 
 

@@ -26,9 +26,15 @@ def network_energy(top, pinned_mask: np.ndarray, x: np.ndarray, v: np.ndarray, g
 
 
 def write_energy_csv(path, rows: Iterable[Mapping]) -> None:
-    """Write energy rows (dicts with keys of :data:`FIELDS`) as CSV with a header line."""
+    """Write energy rows (dicts with keys of :data:`FIELDS`) as CSV with a header line; further
+    named terms in the rows (bending, volume, a material, user energies) follow as columns, in the
+    order they first appear."""
+    rows = list(rows)
+    fields = list(FIELDS)
+    for r in rows:
+        fields += [k for k in r if k not in fields]
     with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=FIELDS, extrasaction="ignore")
+        w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
         w.writeheader()
         for r in rows:
-            w.writerow({k: repr(float(r[k])) if k in r else "" for k in FIELDS})
+            w.writerow({k: repr(float(r[k])) if k in r else "" for k in fields})
