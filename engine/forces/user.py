@@ -166,7 +166,7 @@ class UserEnergy:
     def forces(self, X) -> np.ndarray:
         """(N, 3) −∇ψ (N) at X, float64, for tests and gradient checks."""
         self._grad(X)
-        fe = -self.xe.grad.to_numpy()[: self.count].astype(np.float64)  # (E, 3, k)
+        fe = -self.xe.grad.to_numpy()[: self.count].astype(np.float64).reshape(self.count, 3, self.arity)
         nodes = self.nodes.to_numpy()[: self.count]
         out = np.zeros((self.n_nodes, 3))
         for s in range(self.arity):
