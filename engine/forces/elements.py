@@ -141,37 +141,52 @@ def _clear(g: ti.template()):
         g.mult[e] = 0
 
 
+@ti.func
+def _project_one(g: ti.template(), X: ti.template(), w: ti.template(), hh, q):
+    """Project the element at position q of the colour order (Macklin et al. 2016, eq. 18)."""
+    dt = g.dtype
+    e = g.color_elem[q]
+    val, G, ok = _term(g, X, e)
+    C = val
+    alpha = ti.cast(1, dt)
+    if ti.static(g.kind == "elastic"):  # C = √(2ψ), ∇C = ∇ψ / C, α = 1
+        C = ti.sqrt(2 * ti.max(val, 0))
+        if C > terms.EPS:
+            G = G / C
+        else:
+            ok = 0
+    else:
+        alpha = 1 / g.k[e]
+    nd = g.nodes[e]
+    den = ti.cast(0, dt)
+    for s in ti.static(range(g.arity)):
+        gs = ti.Vector([G[0, s], G[1, s], G[2, s]])
+        den += w[nd[s]] * gs.norm_sqr()
+    at = alpha / (hh * hh)
+    if ok and den > 0:
+        dlam = (-C - at * g.mult[e]) / (den + at)
+        g.mult[e] += dlam
+        for s in ti.static(range(g.arity)):
+            X[nd[s]] += w[nd[s]] * dlam * ti.Vector([G[0, s], G[1, s], G[2, s]])
+
+
 @ti.kernel
 def _project(g: ti.template(), X: ti.template(), x_prev: ti.template(), w: ti.template(), h: ti.f64):
-    """All colours in order, each a top-level loop (engine.xpbd.solver)."""
-    dt = g.dtype
-    hh = ti.cast(h, dt)
+    """All colours in order, each a top-level loop (engine.xpbd.solver): one launch a sweep."""
+    hh = ti.cast(h, g.dtype)
     for c in ti.static(range(len(g.color_ranges))):
         lo, hi = ti.static(g.color_ranges[c])
         for q in range(lo, hi):
-            e = g.color_elem[q]
-            val, G, ok = _term(g, X, e)
-            C = val
-            alpha = ti.cast(1, dt)
-            if ti.static(g.kind == "elastic"):  # C = √(2ψ), ∇C = ∇ψ / C, α = 1
-                C = ti.sqrt(2 * ti.max(val, 0))
-                if C > terms.EPS:
-                    G = G / C
-                else:
-                    ok = 0
-            else:
-                alpha = 1 / g.k[e]
-            nd = g.nodes[e]
-            den = ti.cast(0, dt)
-            for s in ti.static(range(g.arity)):
-                gs = ti.Vector([G[0, s], G[1, s], G[2, s]])
-                den += w[nd[s]] * gs.norm_sqr()
-            at = alpha / (hh * hh)
-            if ok and den > 0:
-                dlam = (-C - at * g.mult[e]) / (den + at)
-                g.mult[e] += dlam
-                for s in ti.static(range(g.arity)):
-                    X[nd[s]] += w[nd[s]] * dlam * ti.Vector([G[0, s], G[1, s], G[2, s]])
+            _project_one(g, X, w, hh, q)
+
+
+@ti.kernel
+def _project_range(g: ti.template(), X: ti.template(), w: ti.template(), h: ti.f64, lo: ti.i32, hi: ti.i32):
+    """One colour [lo, hi) (a launch per colour: for the materials, whose projection is long enough
+    that one unrolled copy per colour — 30 for a 6³ box — would take minutes to compile)."""
+    hh = ti.cast(h, g.dtype)
+    for q in range(lo, hi):
+        _project_one(g, X, w, hh, q)
 
 
 @ti.data_oriented
@@ -289,7 +304,11 @@ class ElementGroup:
         _clear(self)
 
     def project(self, X, x_prev, w, h: float) -> None:
-        _project(self, X, x_prev, w, h)
+        if self.kind == "elastic":
+            for lo, hi in self.color_ranges:
+                _project_range(self, X, w, h, lo, hi)
+        else:
+            _project(self, X, x_prev, w, h)
 
     def energy(self, X) -> float:
         return _energy(self, X) if self.count else 0.0

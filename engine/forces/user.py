@@ -107,26 +107,24 @@ class UserEnergy:
             return s
 
         @ti.kernel
-        def project(X: ti.template(), w: ti.template(), h: ti.f64):
-            """One colour's worth per call is not needed: all colours, each a top-level loop."""
+        def project(X: ti.template(), w: ti.template(), h: ti.f64, lo: ti.i32, hi: ti.i32):
+            """One colour [lo, hi): a launch per colour (a user energy may be long to compile)."""
             hh = ti.cast(h, dt)
-            for c in ti.static(range(len(g.color_ranges))):
-                lo, hi = ti.static(g.color_ranges[c])
-                for q in range(lo, hi):
-                    e = g.color_elem[q]
-                    nd = g.nodes[e]
-                    C = ti.sqrt(2 * ti.max(g.psi[e], 0))
-                    den = ti.cast(0, dt)
+            for q in range(lo, hi):
+                e = g.color_elem[q]
+                nd = g.nodes[e]
+                C = ti.sqrt(2 * ti.max(g.psi[e], 0))
+                den = ti.cast(0, dt)
+                for s in ti.static(range(k)):
+                    for cc in ti.static(range(3)):
+                        den += w[nd[s]] * (g.xe.grad[e][cc, s] / ti.max(C, 1e-30)) ** 2
+                at = 1 / (hh * hh)
+                if C > 1e-12 and den > 0:
+                    dlam = (-C - at * g.mult[e]) / (den + at)
+                    g.mult[e] += dlam
                     for s in ti.static(range(k)):
-                        for cc in ti.static(range(3)):
-                            den += w[nd[s]] * (g.xe.grad[e][cc, s] / ti.max(C, 1e-30)) ** 2
-                    at = 1 / (hh * hh)
-                    if C > 1e-12 and den > 0:
-                        dlam = (-C - at * g.mult[e]) / (den + at)
-                        g.mult[e] += dlam
-                        for s in ti.static(range(k)):
-                            X[nd[s]] += w[nd[s]] * dlam / C * ti.Vector(
-                                [g.xe.grad[e][0, s], g.xe.grad[e][1, s], g.xe.grad[e][2, s]])
+                        X[nd[s]] += w[nd[s]] * dlam / C * ti.Vector(
+                            [g.xe.grad[e][0, s], g.xe.grad[e][1, s], g.xe.grad[e][2, s]])
 
         self._copy_in, self._element_energy, self._total, self._project = copy_in, element_energy, total, project
 
@@ -154,7 +152,8 @@ class UserEnergy:
         # Jacobi within a colour would be wrong for shared nodes: the gradient is refreshed once
         # per sweep (per iteration), then every colour projects in order with it.
         self._grad(X)
-        self._project(X, w, h)
+        for lo, hi in self.color_ranges:
+            self._project(X, w, h, lo, hi)
 
     def energy(self, X) -> float:
         if not self.count:
