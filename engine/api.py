@@ -26,9 +26,9 @@ import weakref
 
 import numpy as np
 
-from . import checks, reuse
+from . import checks, reuse, runtime
 from .budget import fit, hold, particle_budget, release, set_particle_budget
-from .builder import SceneBuilder
+from .builder import ConfigBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
 from .particles.capacity import MAX_POOL
 from .clock import FixedTimestep
@@ -49,6 +49,18 @@ def _load(where: str, data: dict):
         return load_config(data)
     except ConfigError as e:
         raise ValueError(f"{where}: {'; '.join(e.problems)}") from None
+
+
+def _shallow(where: str, data) -> None:
+    """Refuse data nested deeper than a config can be (before deepcopy or the checks recurse
+    into it: a 100,000-deep dict is one line, not a RecursionError)."""
+    from .config.load import MAX_DEPTH, check_depth
+
+    try:
+        check_depth(data)
+    except ConfigError:
+        raise ValueError(f"{where}: dicts and lists nested more than {MAX_DEPTH} levels deep are not allowed "
+                         f"(a config needs 5)") from None
 
 
 def _discard(key, scene, token, program) -> None:
@@ -72,6 +84,7 @@ class ParticleScene:
                  interpolate: bool = False, max_dt: float = MAX_DT, spare_emitters: int = SPARE_EMITTERS,
                  spare_slots: int = SPARE_SLOTS):
         where = type(self).__name__
+        runtime.check_thread(where)
         self._spare = (integer(f"{where}: spare_emitters", spare_emitters, 0, 64),
                        integer(f"{where}: spare_slots", spare_slots, 0, MAX_POOL))
         self._contacts = (65536 if contacts is True else
@@ -80,6 +93,7 @@ class ParticleScene:
         self._interpolate = boolean(f"{where}: interpolate", interpolate)
         self.max_dt = number(f"{where}: max_dt", max_dt, 0.0, 60.0, lo_open=True)
         if isinstance(config, dict):
+            _shallow(f"{where}: config", config)
             data = checks.plain(copy.deepcopy(config))
         elif hasattr(config, "model_dump"):
             data = config.model_dump(exclude_none=True)
@@ -115,6 +129,7 @@ class ParticleScene:
         if self._finalizer is not None:
             self._finalizer.detach()  # the scene it replaces was carried over: not reusable
         self.scene, self.cfg, self._data, self._key = scene, cfg, data, key
+        self._program = reuse.program()
         self._token = object()
         hold(self._token, scene.capacity)
         self._finalizer = weakref.finalize(self, _discard, key, scene, self._token, reuse.program())
@@ -168,8 +183,12 @@ class ParticleScene:
         self.close()
 
     def _live(self, where: str) -> Scene:
+        runtime.check_thread(where)
         if self.scene is None:
             raise RuntimeError(f"{where}: this scene was closed")
+        if self._program != reuse.program():
+            raise RuntimeError(f"{where}: this scene was built before engine.runtime.reset(), which freed its "
+                               f"fields and kernels: build it again")
         return self.scene
 
     # -- time -------------------------------------------------------------------------------------
@@ -236,7 +255,7 @@ class ParticleScene:
         if given, without moving the emitter (a spark shower where a bullet hits)."""
         s = self._live("burst")
         e = self._emitter("burst", name)
-        ring = s.particles.layout.sizes[e]
+        ring = s.emitter_capacity(e)
         n = integer("burst: count", count, 0, ring)
         p = None if position is None else vector("burst: position", position)
         if n:
@@ -263,7 +282,7 @@ class ParticleScene:
         return bodies[names.index(checks.name(f"{where}: body", name, names, "body"))]
 
     def _node(self, where: str, body, node) -> int:
-        return integer(f"{where}: node", node, 0, body.topology.node_count - 1)
+        return integer(f"{where}: node", node, 0, body.node_count - 1)
 
     def pin(self, body: str, node: int, target=None) -> None:
         """Hold a node of a soft body at ``target`` (default: where it is), from the next step."""
@@ -289,11 +308,7 @@ class ParticleScene:
         (engine.forces.user); the energy is reported under ``name`` by :meth:`energy`. A k = 1
         energy over every node is an external potential U(x) (a well, a terrain). Kept until the
         scene is rebuilt (add_body, remove_body…)."""
-        from .forces.user import UserEnergy
-
-        b = self._body("add_energy", body)
-        n = b.topology.node_count
-        b.system.add_elements(UserEnergy(energy, nodes, n, params, dtype=b.system.dtype, name=name))
+        self._body("add_energy", body).add_energy(energy, nodes, params, name)
 
     # -- read-back --------------------------------------------------------------------------------
     def particles(self) -> dict:
@@ -321,7 +336,7 @@ class ParticleScene:
     def energy(self) -> dict:
         """Per soft body: kinetic, gravitational and every energy term by name (spring, bending,
         area, volume, the solid's material, user energies) and their total (J)."""
-        return {b.cfg.name or f"body{k}": b.system.energy() for k, b in enumerate(self._live("energy").bodies)}
+        return {b.cfg.name or f"body{k}": b.energy() for k, b in enumerate(self._live("energy").bodies)}
 
     def contacts(self, min_speed: float = 0.0, body: str | None = None) -> Contacts:
         """Every contact since the previous call (the queue drains), however many steps ran,
@@ -338,7 +353,7 @@ class ParticleScene:
             if not b.cfg.contacts:
                 raise RuntimeError(f"contacts: body {body!r} does not record contacts: set contacts = true "
                                    f"in its config")
-            c = b.system.contact_log.drain(names)
+            c = b.contacts(names)
         else:
             c = s.particles.contacts(names) if s.particles is not None else Contacts.empty(names)
         return c.where(c.speed >= v) if v > 0 else c
@@ -378,6 +393,7 @@ class ParticleScene:
     def _add(self, where: str, key: str, item) -> None:
         if not isinstance(item, dict):
             raise TypeError(f"{where}: {checks.show(item)} is not a dict of config keys")
+        _shallow(f"{where}: {key[:-1] if key != 'bodies' else 'body'}", item)
         data = copy.deepcopy(self._data)
         data.setdefault(key, []).append(checks.plain(copy.deepcopy(item)))
         self._rebuild(where, data)
@@ -395,6 +411,7 @@ class ParticleScene:
         s = self._live("add_emitter")
         if not isinstance(emitter, dict):
             raise TypeError(f"add_emitter: {checks.show(emitter)} is not a dict of config keys")
+        _shallow("add_emitter: emitter", emitter)
         data = copy.deepcopy(self._data)
         data.setdefault("emitters", []).append(checks.plain(copy.deepcopy(emitter)))
         cfg = _load("add_emitter", data)
@@ -421,3 +438,11 @@ class ParticleScene:
 
     def remove_body(self, name: str) -> None:
         self._remove("remove_body", "bodies", self._body("remove_body", name).cfg.name)
+
+
+class SceneBuilder(ConfigBuilder):
+    __doc__ = ConfigBuilder.__doc__
+
+    def build(self, **kw):
+        """A :class:`ParticleScene` (its keyword arguments: contacts, render, interpolate, max_dt)."""
+        return ParticleScene(copy.deepcopy(self.data), **kw)

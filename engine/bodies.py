@@ -8,8 +8,8 @@ import math
 import numpy as np
 
 from .colliders import Colliders
-from .paths import sample_path
 from .forces.terms import lame
+from .paths import Path, sample_path
 from .springs import SpringSystem, Topology, chain, cloth, hair, jelly, line_roots, scalp_roots, solid
 from .springs.topology import STRUCTURAL, hinges
 from .system import SystemBase
@@ -96,6 +96,7 @@ class SoftBody(SystemBase):
         (``contacts = true``)."""
         self.cfg, self.index = cfg, index
         self.name = cfg.name or f"soft_bodies[{index}]"
+        self._pin_path = Path((k.time, k.position) for k in cfg.pin_path or ())  # sampled each step
         self.topology = build_topology(cfg)
         n = self.topology.node_count
         bad = [p for p in (cfg.pins if isinstance(cfg.pins, list) else []) if p >= n]
@@ -137,6 +138,17 @@ class SoftBody(SystemBase):
     def energy(self) -> dict:
         return self.system.energy()
 
+    @property
+    def node_count(self) -> int:
+        return self.topology.node_count
+
+    def add_energy(self, energy, nodes, params=None, name: str = "user") -> None:
+        """Attach a user energy (engine.forces.user.UserEnergy) over (E, k) ``nodes``."""
+        from .forces.user import UserEnergy
+
+        self.system.add_elements(UserEnergy(energy, nodes, self.node_count, params, dtype=self.system.dtype,
+                                            name=name))
+
     def contacts(self, names=()):
         return self.system.contact_log.drain(names)
 
@@ -149,7 +161,7 @@ class SoftBody(SystemBase):
                 self.system.release(int(node))
             self.released = True
         if c.pin_path and not self.released and len(self.pinned):
-            offset = sample_path([(k.time, k.position) for k in c.pin_path], t0 + dt, (0, 0, 0)) \
+            offset = sample_path(self._pin_path, t0 + dt, (0, 0, 0)) \
                 - np.asarray(c.pin_path[0].position, np.float64)
             for node, home in zip(self.pinned, self.pin_home):
                 self.system.set_pin_target(int(node), home + offset)

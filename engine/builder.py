@@ -1,12 +1,12 @@
-"""Scenes built in code: the config's keys as keyword arguments."""
+"""Scene configs built in code: the config's keys as keyword arguments (the game API's
+:class:`~engine.api.SceneBuilder` adds ``build()``; this module knows no scene, so the two do not
+import each other)."""
 from __future__ import annotations
-
-import copy
 
 from .checks import plain
 
 
-class SceneBuilder:
+class ConfigBuilder:
     """Build a scene in code: ``SceneBuilder(fps=60).emitter(rate=200, effect="sparks")
     .collider(type="plane").body(type="cloth", ...).build(contacts=True)``. Keys are the config's
     keys and are validated the same way (unknown keys are errors naming the nearest one); values
@@ -43,10 +43,3 @@ class SceneBuilder:
 
     def body(self, **kw):
         return self._item("bodies", kw)
-
-    def build(self, **kw):
-        """A :class:`~engine.api.ParticleScene` (its keyword arguments: contacts, render,
-        interpolate, max_dt)."""
-        from .api import ParticleScene
-
-        return ParticleScene(copy.deepcopy(self.data), **kw)

@@ -31,7 +31,7 @@ LIMITS = {
     "dt (step)": f"finite, > 0 and <= max_dt (default {MAX_DT:g} s; at most {MAX_STEPS_PER_CALL:,} "
                  "integrator steps of solver.h)",
     "max_dt": "finite, > 0 and <= 60 s",
-    "frame_time (FixedTimestep.advance)": "finite, >= 0 (a stall is cut to max_steps steps)",
+    "frame_time (FixedTimestep.advance)": "finite, >= 0 (a stall is cut to max_steps steps; a step that raised drops the time left)",
     "name (emitter, collider, body)": "a str naming one in the scene (KeyError lists the names)",
     "position, target (m)": f"3 finite numbers within ±{COORD:g}: list, tuple or NumPy array",
     "wind (m/s), gravity (m/s²)": f"3 finite numbers within ±{COORD:g}",
@@ -45,7 +45,8 @@ LIMITS = {
                               f"and at most {MAX_RENDER_BYTES >> 30} GiB of render memory "
                               f"({RENDER_BYTES_PER_PIXEL} B per pixel)",
     "camera (render)": "an engine.api.Camera: finite position and look_at apart, fov in (1, 170) degrees",
-    "out (render)": "a C-contiguous uint8 NumPy array of shape (height, width, 4)",
+    "out (render)": "a writeable, C-contiguous uint8 NumPy array of shape (height, width, 4) (a read-only array, "
+                    "one over `bytes` or a read-only `np.memmap` is refused)",
     "alpha (render)": "None or finite in [0, 1]; needs a scene built with interpolate=True",
     "contacts (build)": f"bool or a whole number 0 to {MAX_CONTACTS:,} (records kept between drains)",
     "emitter, collider, body (add_*)": "a dict of config keys, checked as a config is",
@@ -54,7 +55,7 @@ LIMITS = {
     "spare_emitters, spare_slots (build)": "whole numbers, 0 to 64 and 0 to 50,000,000",
     "copies (prepare)": "a whole number, 1 to 64",
     "sizes (warm_up, prepare)": "(width, height) pairs, as render's",
-    "dt, max_steps (FixedTimestep)": "dt finite in (0, 1] s; max_steps a whole number, 1 to 100,000",
+    "dt, max_steps (FixedTimestep)": "dt finite in [1e-06, 1] s; max_steps a whole number, 1 to 100,000",
 }
 
 
@@ -77,7 +78,10 @@ def number(where: str, v, lo: float = -math.inf, hi: float = math.inf, *, lo_ope
     """A finite real in [lo, hi] ((lo, hi] with ``lo_open``) as a float."""
     if not _is_real(v):
         raise TypeError(f"{where}: {show(v)} is not a number")
-    x = float(v)
+    try:
+        x = float(v)
+    except OverflowError:  # an int past the float range (10**400)
+        x = math.inf if v > 0 else -math.inf
     ok = math.isfinite(x) and (x > lo if lo_open else x >= lo) and x <= hi
     if not ok:
         rng = [f"> {lo:g}" if lo_open else f">= {lo:g}"] if math.isfinite(lo) else []
@@ -121,7 +125,7 @@ def name(where: str, v, names, kind: str) -> str:
     """One of ``names`` (KeyError naming the value and the names of that ``kind`` there are)."""
     if not isinstance(v, str):
         raise TypeError(f"{where}: {show(v)} is not a name (str)")
-    if v not in names:
+    if not v or v not in names:  # "" is no name: unnamed items cannot be reached by it
         known = ", ".join(repr(n) for n in names if n) or "none"
         raise KeyError(f"{where}: no {kind} named {show(v)} (names: {known})")
     return v
@@ -153,11 +157,22 @@ def camera(where: str, cam, cls):
 
 
 def image_array(where: str, out, width: int, height: int) -> np.ndarray:
+    """The caller's image array: checked property by property (dtype, shape, C-contiguous,
+    writeable: a read-only array, one over ``bytes`` or a read-only ``np.memmap``, is refused,
+    never written), each failure named in the message."""
     if not isinstance(out, np.ndarray):
         raise TypeError(f"{where}: {show(out)} is not a NumPy array")
-    if out.dtype != np.uint8 or out.shape != (height, width, 4) or not out.flags.c_contiguous:
-        raise ValueError(f"{where}: a {out.dtype} array of shape {out.shape} is not allowed: must be a "
-                         f"C-contiguous uint8 array of shape ({height}, {width}, 4)")
+    want = f"must be a writeable C-contiguous uint8 array of shape ({height}, {width}, 4)"
+    if out.dtype != np.uint8:
+        raise ValueError(f"{where}: dtype {out.dtype} is not allowed: {want}")
+    if out.shape != (height, width, 4):
+        raise ValueError(f"{where}: shape {out.shape} is not allowed: {want}")
+    if not out.flags.c_contiguous:
+        raise ValueError(f"{where}: the array is not C-contiguous (strides {out.strides}): {want}; "
+                         f"pass np.ascontiguousarray(...) and copy it back")
+    if not out.flags.writeable:
+        raise ValueError(f"{where}: the array is read-only (writeable=False: a view of bytes, a read-only "
+                         f"memmap or flags.writeable cleared): {want}")
     return out
 
 

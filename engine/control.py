@@ -21,7 +21,7 @@ from typing import List, Optional, Sequence
 import numpy as np
 import taichi as ti
 
-from .paths import sample_path
+from .paths import Path, sample_path
 
 
 def _vec(p) -> tuple:
@@ -59,7 +59,7 @@ class ColliderInput:
     @classmethod
     def from_spec(cls, spec) -> "ColliderInput":
         """Where a :class:`~engine.colliders.ColliderSpec` starts and how its path moves it."""
-        return cls(_vec(spec.point), [(t, _vec(p)) for t, p in spec.path], spec.name)
+        return cls(_vec(spec.point), Path((t, _vec(p)) for t, p in spec.path), spec.name)
 
 
 @dataclass
@@ -93,7 +93,8 @@ class Control:
     def inputs_for(cfg, collider_specs):
         """(emitter inputs, collider inputs) a validated config starts with."""
         ems = [EmitterInput(_vec(e.position), e.rate, e.emitting,
-                            [(k.time, _vec(k.position)) for k in e.path], name=e.name) for e in cfg.emitters]
+                            Path((k.time, _vec(k.position)) for k in e.path), name=e.name)
+               for e in cfg.emitters]
         return ems, [ColliderInput.from_spec(s) for s in collider_specs]
 
     @classmethod

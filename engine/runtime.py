@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import threading
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")  # no network check at import (PERF-NOTES)
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep stdout for our own output
@@ -20,12 +21,34 @@ ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
 # list also probes OpenGL, which crashed the process on a headless machine without a GPU.)
 _GPU_ORDER = ("cuda", "vulkan", "metal")
 
-_state = {"arch": None, "requested": None, "kwargs": None}
+_state = {"arch": None, "requested": None, "kwargs": None, "thread": None}
 _reset_hooks = []  # caches holding fields or kernels of the current Taichi program
 
 
 class ArchUnavailable(RuntimeError):
     """The requested backend cannot start on this machine (no device, no driver)."""
+
+
+class WrongThread(RuntimeError):
+    """An engine call from a thread other than the one that initialised Taichi."""
+
+
+def check_thread(where: str) -> None:
+    """The thread policy: Taichi is single-threaded (a kernel compiled or launched from a second
+    thread gives "nested kernels" errors, silently wrong state or an abort in Taichi's runtime),
+    so every engine call must come from the thread that initialised Taichi (the engine's
+    :func:`init`, or the thread that first built a scene in a host that initialised Taichi
+    itself). Any other thread gets one line naming the method, and nothing happens."""
+    owner = _state["thread"]
+    if owner is not None and owner[0] != threading.get_ident():
+        raise WrongThread(f"{where}: called from thread {threading.current_thread().name!r}, but Taichi "
+                          f"was initialised on thread {owner[1]!r}: the engine is single-threaded; call it "
+                          f"from that thread (hand work to it with a queue)")
+
+
+def _own_thread() -> None:
+    t = threading.current_thread()
+    _state["thread"] = (threading.get_ident(), t.name)
 
 
 def _host_initialised() -> bool:
@@ -63,11 +86,13 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
     if arch not in ARCHES:
         raise ValueError(f"arch: unknown value {arch!r}; allowed: {', '.join(ARCHES)}")
     if _state["arch"] is not None:
+        check_thread("engine.runtime.init")
         if arch not in ("auto", _state["requested"], _state["arch"]) and _state["arch"] != "host":
             raise RuntimeError(f"Taichi already initialised with arch={_state['arch']}, not {arch}")
         return _state["arch"]
     if _host_initialised():
         _state["arch"] = _state["requested"] = "host"
+        _own_thread()
         return "host"
     level = {"warn": ti.WARN, "error": ti.ERROR}[log_level]
     kwargs = dict(default_fp=ti.f32, offline_cache=True, log_level=level, debug=debug,
@@ -91,6 +116,7 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
                         f"device or driver found)") from None
                 ti.init(arch=ti.cpu, **kwargs)
     _state["arch"], _state["requested"] = _arch_in_use(), arch
+    _own_thread()
     return _state["arch"]
 
 
@@ -104,12 +130,13 @@ def reset() -> None:
     ``init`` starts a fresh one. The LLVM backends allow at most 512 live SNode trees and 2048
     SNodes per program, and every field allocated after a kernel ran opens a new tree: a long
     process that builds many scenes (a test session) resets between groups of scenes. Objects
-    built before the reset must not be used after it."""
+    built before the reset must not be used after it (they say so in one line)."""
+    check_thread("engine.runtime.reset")
     for hook in _reset_hooks:
         hook()
     if _state["arch"] not in (None, "host"):
         ti.reset()
-    _state["arch"] = _state["requested"] = None
+    _state["arch"] = _state["requested"] = _state["thread"] = None
 
 
 class Interrupted(Exception):
@@ -134,6 +161,10 @@ def check_stop() -> None:
         raise Interrupted("stopped")
 
 
-def ensure_init() -> str:
-    """Initialise with defaults unless already done (by the engine or by the host)."""
-    return _state["arch"] or init("cpu")
+def ensure_init(where: str = "engine") -> str:
+    """Initialise with defaults unless already done (by the engine or by the host); from another
+    thread than the one that did, :class:`WrongThread` naming ``where``."""
+    if _state["arch"]:
+        check_thread(where)
+        return _state["arch"]
+    return init("cpu")

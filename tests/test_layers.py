@@ -7,7 +7,13 @@ Rules (README, "How the code is laid out"):
 - the config package's import closure holds no Taichi (validating a file needs no compiler);
 - only ``engine.ode`` reads method coefficients (tableaus, splittings, a method's ``scheme``,
   stability polynomials): everyone else sees a method's name, order and cost;
-- only the driver (``engine.ode.driver``) calls the step-size controller.
+- only the driver (``engine.ode.driver``) calls the step-size controller;
+- physics rooms (particles, soft bodies, rigid bodies: :data:`PHYSICS_ROOMS`) never import one
+  another: the scene (``engine.scene``) joins them; the shared rooms below them (ode, geometry,
+  forces, xpbd, the System protocol, colliders, contacts) import no physics room;
+- the renderer imports no physics room and not the scene: it draws what systems hand it;
+- no import circle anywhere in the first-party packages (a module-level import cycle between two
+  modules; imports inside functions count too, since they are still a circle of knowledge).
 Each rule is also checked against a planted violation, so a checker that sees nothing fails.
 """
 import ast
@@ -104,6 +110,61 @@ def imported_name(dep, pkg="engine.ode"):
     return dep.rsplit(".", 1)[1] if in_pkg(dep, pkg) and dep != pkg else None
 
 
+# a room is a tuple of packages/modules; engine.bodies (config → spring network) is the soft-body room's
+PHYSICS_ROOMS = {"particles": ("engine.particles",), "soft bodies": ("engine.springs", "engine.softbody", "engine.bodies"),
+                 "rigid bodies": ("engine.rigid",)}
+SHARED_ROOMS = ("engine.ode", "engine.geometry", "engine.forces", "engine.xpbd", "engine.system",
+                "engine.colliders", "engine.contacts")
+FIRST_PARTY = ("engine", "effects", "particles_tools")
+
+
+def room_of(mod):
+    return next((r for r, pkgs in PHYSICS_ROOMS.items() if any(in_pkg(mod, p) for p in pkgs)), None)
+
+
+def cycles(g):
+    """Import circles among first-party modules: one line per strongly connected component of
+    more than one module (Tarjan, iterative), its members sorted."""
+    nodes = [m for m in g if any(in_pkg(m, p) for p in FIRST_PARTY)]
+    # importing a submodule runs its parent packages first: that edge is no circle of knowledge
+    edges = {m: sorted({d for d in g[m] if d in g and d != m and not in_pkg(m, d)}) for m in nodes}
+    index, low, on, stack, out, counter = {}, {}, set(), [], [], [0]
+    for root in nodes:
+        if root in index:
+            continue
+        work = [(root, 0)]
+        while work:
+            v, i = work.pop()
+            if i == 0:
+                index[v] = low[v] = counter[0]
+                counter[0] += 1
+                stack.append(v)
+                on.add(v)
+            nbrs = edges.get(v, [])
+            if i < len(nbrs):
+                work.append((v, i + 1))
+                w = nbrs[i]
+                if w not in index:
+                    work.append((w, 0))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            if work:
+                u = work[-1][0]
+                low[u] = min(low[u], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
 def violations(g, src=None):
     """Every broken rule, one line each; ``src`` ({module: (source, is_package)}) adds the
     rules that read attribute names, not only imports."""
@@ -130,15 +191,35 @@ def violations(g, src=None):
                 for a in sorted(used & COEFFICIENT_ATTRIBUTES)]
         bad += [f"{m} calls .{a}() (only the driver calls the controller)"
                 for a in sorted(used & CONTROLLER_NAMES)]
+    for m, deps in g.items():
+        room = room_of(m)
+        if room is not None:
+            bad += [f"{m} imports {d} (physics rooms never import one another: the scene joins them)"
+                    for d in deps if room_of(d) not in (None, room)]
+        if any(in_pkg(m, r) for r in SHARED_ROOMS):
+            bad += [f"{m} imports {d} (a shared room imports no physics room)"
+                    for d in deps if room_of(d) is not None or in_pkg(d, "engine.scene")]
+        if in_pkg(m, "engine.render"):
+            bad += [f"{m} imports {d} (the renderer imports no physics room)"
+                    for d in deps if room_of(d) is not None or in_pkg(d, "engine.scene")]
+    bad += [f"import circle: {' -> '.join(c)}" for c in cycles(g)]
     taichi = sorted(d for d in closure(g, "engine.config") if in_pkg(d, "taichi"))
     if taichi:
         bad.append(f"engine.config's import closure holds {taichi[0]} (validation needs no Taichi)")
     return bad
 
 
+_BASE = {}
+
+
 def check(extra=None):
-    src = sources(extra)
-    return violations({n: imports_of(t, n, p) for n, (t, p) in src.items()}, src)
+    """Every broken rule in the tree, with ``extra`` planted (the tree is read and parsed once)."""
+    if not _BASE:
+        src = sources()
+        _BASE.update(src=src, graph={n: imports_of(t, n, p) for n, (t, p) in src.items()})
+    src = dict(_BASE["src"], **(extra or {}))
+    g = dict(_BASE["graph"], **{n: imports_of(t, n, p) for n, (t, p) in (extra or {}).items()})
+    return violations(g, src)
 
 
 def test_layers_hold():
@@ -170,6 +251,15 @@ def test_config_imports_no_taichi_when_run():
      "only the driver calls the controller"),
     ("engine.springs.system", "ok, h = self.ctrl.propose(h, err)\n", False,
      "only the driver calls the controller"),
+    ("engine.springs.system", "from ..particles.pool import ParticleState\n", False,
+     "physics rooms never import one another"),
+    ("engine.particles.system", "from ..bodies import SoftBody\n", False,
+     "physics rooms never import one another"),
+    ("engine.colliders", "from .particles import pool\n", False, "a shared room imports no physics room"),
+    ("engine.render.mesh", "from ..springs.topology import cloth\n", False,
+     "the renderer imports no physics room"),
+    ("engine.render.renderer", "from ..scene import Scene\n", False, "the renderer imports no physics room"),
+    ("engine.control", "from .scene import Scene\n", False, "import circle"),
 ])
 def test_planted_violation_is_caught(name, source, pkg, rule):
     """The checker is not blind: each rule fails on a violation planted in a real module."""

@@ -227,7 +227,7 @@ def check_depth(data, where: str = "config") -> None:
                                f"levels deep"])
         if isinstance(node, dict):
             todo += [(v, depth + 1) for v in node.values()]
-        elif isinstance(node, list):
+        elif isinstance(node, (list, tuple)):
             todo += [(v, depth + 1) for v in node]
 
 

@@ -13,7 +13,7 @@ import math
 import re
 from typing import Annotated, List, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..ode.methods import INTEGRATORS
@@ -38,8 +38,21 @@ ScalarStop = Annotated[List[Annotated[float, Field(ge=0, le=1e3)]], Field(min_le
 
 MAX_STOPS = 8
 MAX_FRAMES = 1_000_000  # frames in one run, whether given as `frames` or as duration × fps
+
+
+def _check_item_name(name: str) -> str:
+    """A name the API finds an emitter, collider or body by and the run summary prints: "" (or
+    no key) leaves it unnamed; otherwise printable, not blank, no control characters (newline,
+    NUL) and no leading or trailing spaces."""
+    if name and (re.search(r"[\x00-\x1f\x7f]", name) or not name.strip() or name != name.strip()):
+        raise ValueError(f"{name!r} is not allowed: a name must be printable text without control characters "
+                         f"(newline, NUL, tab), not blank and without leading or trailing spaces (\"\" or no "
+                         f"name key: unnamed)")
+    return name
+
+
 # Names of emitters, colliders and bodies: the API finds things by them, the run summary prints them
-Name = Annotated[str, Field(max_length=64)]
+Name = Annotated[str, Field(max_length=64), AfterValidator(_check_item_name)]
 
 
 def _check_curve(stops):
@@ -54,9 +67,13 @@ def _check_curve(stops):
 
 
 def _check_path(path):
-    ts = [k.time for k in path]
-    if any(b <= a for a, b in zip(ts, ts[1:])):
-        return f"keyframe times must increase, got {ts}"
+    """Keyframe times must increase: the message names the first keyframe that does not (a path
+    may hold a million keyframes; the message stays one short line)."""
+    for i in range(1, len(path or ())):
+        a, b = path[i - 1].time, path[i].time
+        if b <= a:
+            return (f"keyframe times must increase: keyframe {i} has time {b:g}, not after keyframe {i - 1}'s "
+                    f"{a:g} ({len(path):,} keyframes)")
     return None
 
 
@@ -433,7 +450,9 @@ class Scene(Strict):
         for i, em in enumerate(self.emitters):
             for j, sub in enumerate(em.sub_emitters):
                 key = ("emitters", i, "sub_emitters", j, "emitter")
-                if sub.emitter not in names:
+                if not sub.emitter:
+                    problems.append((key, "'' is not allowed: name the emitter to feed (a named one)"))
+                elif sub.emitter not in names:
                     known = ", ".join(repr(n) for n in names if n) or "none"
                     problems.append((key, f"{sub.emitter!r} names no emitter (names: {known})"))
                 elif sub.emitter == em.name:

@@ -75,6 +75,7 @@ class Emitters:
         # ring heads, serial numbers and counts: state the kernels and Python share
         self.emitter_head, self.emitter_serial = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
         self.emitter_emitted, self.dropped = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
+        self.emitter_moved = ti.field(ti.i32, shape=R)  # births of a launch whose ring slot was alive
         self.set_configs(configs)
         if R:
             self._zero_counters()
@@ -127,7 +128,7 @@ class Emitters:
 
     def _zero_counters(self) -> None:
         zero = np.zeros(self.count, np.int32)
-        for f in (self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped):
+        for f in (self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped, self.emitter_moved):
             f.from_numpy(zero)
 
     def _clocks(self):
@@ -180,7 +181,9 @@ class Emitters:
             a = adv[e]
             a[_k.A_SIZE] = size
             for k, ts0, tspan, at in plan:
-                skip = max(0, k - size)  # more than the whole ring at once: the excess never fits
+                # more than the whole ring in one step (one burst, or the bursts and stream together):
+                # the excess never fits (and two births of one launch never aim at one slot)
+                skip = max(0, k - (size - a[_k.A_HEAD]))
                 k -= skip
                 a[_k.A_DROPPED] += skip
                 a[_k.A_SERIAL] += skip
@@ -197,13 +200,13 @@ class Emitters:
         nrows = len(rows)
         rows = np.array(rows or [(0,) * 7], np.int32)  # (a dummy row when only drops are due)
         vals = np.array(vals or [(0.0,) * 13], np.float32)
-        return rows, vals, nrows, first, adv
+        return rows, vals, nrows, first, adv, np.empty(max(1, first), np.int32)
 
     def spawn(self, plan) -> None:
         """Write a :meth:`plan`'s particles: one launch for all emitters (none for no plan)."""
         if plan is not None:
-            rows, vals, nrows, first, adv = plan
-            _k.spawn(self, self.state, rows, vals, nrows, first, adv)
+            rows, vals, nrows, first, adv, moved = plan
+            _k.spawn(self, self.state, rows, vals, nrows, first, adv, moved)
 
     def emit(self, t0: float, h: float) -> None:
         """Write everything due in [t0, t0 + h) before the step [t0, t0 + h) is taken."""

@@ -6,8 +6,9 @@ once), and the fields are allocated once.
 
 Why rings: emitter e owns slots [start_e, start_e + size_e) and writes new particles at its ring
 head. A segment of at least rate × max lifetime slots guarantees that a slot is dead when the head
-comes back to it; when it is not (a user-set capacity, a burst too big), the new particle is
-dropped and counted — never silently overwritten. Allocation is deterministic (no atomics decide
+comes back to it; when it is not (a user-set capacity, a burst of long-lived particles), the
+new particle takes the first free slot of the segment (:func:`engine.particles.spawn.spawn`), and
+only when the segment is full is it dropped and counted — never silently overwritten. Allocation is deterministic (no atomics decide
 slots) and needs no Python per-particle loop.
 """
 from __future__ import annotations

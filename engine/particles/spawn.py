@@ -78,37 +78,67 @@ def _vec(vals: ti.template(), r, c):
     return ti.Vector([vals[r, c], vals[r, c + 1], vals[r, c + 2]])
 
 
+@ti.func
+def _born(E: ti.template(), S: ti.template(), rows: ti.template(), vals: ti.template(), r, j, slot):
+    """Write particle j of plan row r into ``slot``: its serial, birth time and place depend on
+    (row, j) only, never on the slot it lands in."""
+    e, k = rows[r, R_E], rows[r, R_K]
+    ti.atomic_add(E.emitter_emitted[e], 1)
+    sid = E.emitter_serial[e] + rows[r, R_SERIAL] + j
+    # stratified birth times across the span, so a stream has no gaps or clumps
+    jitter = rand01(E.seed, e, sid, 10)
+    ts = vals[r, V_TS0] + vals[r, V_TSPAN] * (ti.cast(j, ti.f32) + jitter) / ti.cast(k, ti.f32)
+    t0, h = vals[r, V_T0], vals[r, V_H]
+    a = 0.0
+    if h > 0:
+        a = ti.min(1.0, ti.max(0.0, (ts - t0) / h))
+    pa, pb = _vec(vals, r, V_PA), _vec(vals, r, V_PB)
+    init_particle(E, S, slot, e, sid, pa + a * (pb - pa), _vec(vals, r, V_EV))
+    S.particle_age[slot] = -ti.max(0.0, ts - t0)  # born this long into the step
+
+
 @ti.kernel
 def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i32, ndim=2),
           vals: ti.types.ndarray(dtype=ti.f32, ndim=2), nrows: ti.i32, total: ti.i32,
-          adv: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+          adv: ti.types.ndarray(dtype=ti.i32, ndim=2), moved: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     """Write the ``total`` particles of the plan: row r spawns k of emitter e at ring offset
     head + R_HEAD with serials from serial + R_SERIAL, born at stratified times in
     [ts0, ts0 + tspan) and written at the emitter's position then, with age −(t_s − t0): the step
-    kernel advances them from their birth. A slot still alive is not overwritten: counted dropped.
-    Then every emitter's ring head, serial and dropped count advance by ``adv``."""
+    kernel advances them from their birth. A slot still alive is not overwritten: that birth is
+    marked in ``moved`` (one entry per particle of the plan) and, after every ring slot of the
+    launch is written, takes the first free slot of its emitter's segment in slot order (one
+    thread per emitter walks its marked births in plan order: deterministic, no atomics decide a
+    slot), so a burst of long-lived particles does not starve the stream while the segment has
+    room; only a birth that finds no free slot is counted dropped. Then every emitter's ring head,
+    serial and dropped count advance by ``adv``."""
     for q in range(total):
         r = 0
         while r + 1 < nrows and q >= rows[r + 1, R_FIRST]:
             r += 1
-        e, k, j = rows[r, R_E], rows[r, R_K], q - rows[r, R_FIRST]
+        e, j = rows[r, R_E], q - rows[r, R_FIRST]
         slot = rows[r, R_START] + (E.emitter_head[e] + rows[r, R_HEAD] + j) % rows[r, R_SIZE]
+        moved[q] = 0
         if S.particle_alive[slot] != 0:
-            ti.atomic_add(E.dropped[e], 1)  # the ring caught up with a live particle
+            moved[q] = 1  # the ring caught up with a live particle: placed below
+            ti.atomic_add(E.emitter_moved[e], 1)
         else:
-            ti.atomic_add(E.emitter_emitted[e], 1)
-            sid = E.emitter_serial[e] + rows[r, R_SERIAL] + j
-            # stratified birth times across the span, so a stream has no gaps or clumps
-            jitter = rand01(E.seed, e, sid, 10)
-            ts = vals[r, V_TS0] + vals[r, V_TSPAN] * (ti.cast(j, ti.f32) + jitter) / ti.cast(k, ti.f32)
-            t0, h = vals[r, V_T0], vals[r, V_H]
-            a = 0.0
-            if h > 0:
-                a = ti.min(1.0, ti.max(0.0, (ts - t0) / h))
-            pa, pb = _vec(vals, r, V_PA), _vec(vals, r, V_PB)
-            init_particle(E, S, slot, e, sid, pa + a * (pb - pa), _vec(vals, r, V_EV))
-            S.particle_age[slot] = -ti.max(0.0, ts - t0)  # born this long into the step
+            _born(E, S, rows, vals, r, j, slot)
     for e in range(E.count):
+        if E.emitter_moved[e] > 0:  # only when a ring slot was taken (nothing to do otherwise)
+            E.emitter_moved[e] = 0
+            cursor = 0
+            for r in range(nrows):
+                if rows[r, R_E] == e:
+                    start, size = rows[r, R_START], rows[r, R_SIZE]
+                    for j in range(rows[r, R_K]):
+                        if moved[rows[r, R_FIRST] + j] != 0:
+                            while cursor < size and S.particle_alive[start + cursor] != 0:
+                                cursor += 1
+                            if cursor < size:
+                                _born(E, S, rows, vals, r, j, start + cursor)
+                                cursor += 1
+                            else:
+                                E.dropped[e] += 1  # the segment is full
         if adv[e, A_SIZE] > 0:
             E.emitter_head[e] = (E.emitter_head[e] + adv[e, A_HEAD]) % adv[e, A_SIZE]
             E.emitter_serial[e] += adv[e, A_SERIAL]

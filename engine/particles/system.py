@@ -192,6 +192,10 @@ class ParticleSystem(SystemBase):
             self._alive = int(integrate.count_alive(self.state.particle_alive, self.layout.capacity))
         return self._alive
 
+    def ring_size(self, e: int) -> int:
+        """Slots of emitter ``e``'s ring (pool layout)."""
+        return int(self.layout.sizes[e])
+
     def dropped(self) -> int:
         return int(self.emitters.dropped_counts().sum())
 

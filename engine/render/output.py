@@ -63,6 +63,88 @@ def prepare_dir(out_dir: str, overwrite: bool) -> None:
         raise OutputError(f"--out: cannot write to {out_dir}: {e.strerror or e}") from None
 
 
+LOCK = ".particles-run.lock"  # held (flock) by the run writing a folder; removed when it ends
+
+
+class DirLock:
+    """An exclusive lock on an output folder for one ``particles run``: an ``flock`` on
+    ``.particles-run.lock`` (the kernel drops it when the process dies, even by SIGKILL, so it
+    never goes stale), the file removed on :meth:`release`. A second run into the same folder is
+    refused (:class:`OutputRefused`) instead of mixing its frames with the first's."""
+
+    def __init__(self, out_dir: str):
+        self.path, self.fd = os.path.join(out_dir, LOCK), None
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - no flock (Windows): no lock
+            return
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.read(fd, 64).decode(errors="replace").strip() or "?"
+                os.close(fd)
+                raise OutputRefused(f"--out: {out_dir} is being written by another particles run (pid "
+                                    f"{holder}); wait for it to finish or choose another --out") from None
+            try:  # the holder before us may have removed the file after we opened it: lock the new one
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        self.fd = fd
+
+    def release(self) -> None:
+        if self.fd is not None:
+            with contextlib.suppress(OSError):
+                os.remove(self.path)  # still locked: a run waiting on this file retries on a new one
+            os.close(self.fd)
+            self.fd = None
+
+
+def lock_dir(out_dir: str) -> DirLock:
+    """Create ``out_dir`` if needed and lock it for this run (:class:`DirLock`); a path that is
+    not a folder is left to :func:`prepare_dir` to refuse (None)."""
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        return None
+    check_links(out_dir)
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"--out: cannot create {out_dir}: {e.strerror or e}") from None
+    return DirLock(out_dir)
+
+
+def check_links(out_dir: str) -> None:
+    """Refuse an output path through a symbolic link loop or a link to nothing, naming the link
+    (``os.makedirs`` says only "File exists")."""
+    import errno
+
+    path = os.path.abspath(out_dir)
+    parts = []
+    while True:
+        parts.append(path)
+        parent = os.path.dirname(path)
+        if parent == path:
+            break
+        path = parent
+    for p in reversed(parts):  # from the root down: the first link that goes nowhere
+        if not os.path.islink(p):
+            if not os.path.lexists(p):
+                return  # created by makedirs from here on
+            continue
+        try:
+            os.stat(p)
+        except OSError as e:
+            what = ("a symbolic link loop (too many levels of symbolic links)" if e.errno == errno.ELOOP
+                    else f"a symbolic link to {os.readlink(p)!r}, which does not exist")
+            raise OutputError(f"--out: {out_dir}: {p} is {what}; remove the link or choose another --out") from None
+
+
 def default_workers() -> int:
     """PNG encoders: one per core, at least two (zlib releases the GIL while it compresses)."""
     return max(2, min(8, os.cpu_count() or 2))

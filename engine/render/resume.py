@@ -43,6 +43,13 @@ def _is_whole_png(path: str) -> bool:
         return False
 
 
+def _png_size(path: str):
+    """(width, height) from a PNG's IHDR chunk."""
+    with open(path, "rb") as fh:
+        head = fh.read(24)
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
 def whole_frames(out_dir: str) -> int:
     """n such that frame_00000 .. frame_{n-1} all exist and are whole PNGs."""
     n = 0
@@ -81,6 +88,13 @@ def prepare_resume(out_dir: str, record: dict) -> int:
         raise OutputRefused(f"--resume: {out_dir} was rendered with other settings ({shown}); "
                           f"pass --overwrite to start again")
     n = whole_frames(out_dir)
+    want = (record["config"]["render"]["width"], record["config"]["render"]["height"])
+    for k in range(n):
+        size = _png_size(frame_path(out_dir, k))
+        if size != want:
+            raise OutputRefused(f"--resume: {out_dir} is mixed: {os.path.basename(frame_path(out_dir, k))} is "
+                                f"{size[0]}x{size[1]}, this run renders {want[0]}x{want[1]} (two runs wrote it?); "
+                                f"pass --overwrite to start again")
     keep = {frame_path(out_dir, k) for k in range(n)}
     try:
         for f in frames + glob.glob(os.path.join(out_dir, ".*.tmp*")):

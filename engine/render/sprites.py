@@ -146,7 +146,9 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
                 x = pos[i]
                 if ti.static(interp):
                     q = prev[i]
-                    if q[0] == q[0]:  # not NaN: it was alive before the last step
+                    # not NaN: it was alive before the last step; at blend 1 (no alpha, or alpha
+                    # 1) it is drawn exactly where it is: q + 1·(x − q) can round off x
+                    if q[0] == q[0] and blend < 1.0:
                         x = q + blend * (x - q)
                 dpos = x - o
                 z = dpos.dot(f)

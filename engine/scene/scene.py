@@ -19,6 +19,7 @@ from ..colliders import ColliderSpec, Colliders
 from ..control import Control
 from ..ode.driver import DriverStats, SimulationDiverged
 from ..particles.system import ParticleSystem
+from ..paths import Path
 from ..render.camera import Camera
 from .coupler import Coupler
 
@@ -40,7 +41,7 @@ def collider_specs(cfg_colliders):
     out = []
     for c in cfg_colliders:
         common = dict(restitution=c.restitution, friction=c.friction, kill=c.kill, name=c.name,
-                      path=[(k.time, k.position) for k in c.path], visible=c.visible)
+                      path=Path((k.time, k.position) for k in c.path), visible=c.visible)
         if c.type == "plane":
             out.append(ColliderSpec("plane", point=c.point, normal=c.normal, **common))
         else:
@@ -62,7 +63,7 @@ class Scene:
         ``previous``: the scene this one replaces (a rebuild
         between frames): its time, statistics, inputs and live particles carry over by name, and
         its soft bodies whose config did not change are kept without recompiling them."""
-        runtime.ensure_init()
+        runtime.ensure_init("Scene")
         self.cfg = self._built = cfg
         self.t = 0.0
         self.frame = 0
@@ -166,7 +167,7 @@ class Scene:
             self.particles.emitters.carry_local(0.0, 0.0, compile_only=True)
         for body in self.bodies:
             body.positions()
-            body.system.contact_log.drain()
+            body.contacts()
         for w, h in sizes:
             self.render(w, h)
         self.reset()
@@ -204,6 +205,14 @@ class Scene:
     def systems(self) -> list:
         """The scene's systems in coupling order (engine.system)."""
         return list(self.coupler.systems)
+
+    def emitter_capacity(self, e: int) -> int:
+        """Slots of emitter ``e``'s ring in the pool (the most one burst can emit)."""
+        return self.particles.ring_size(e) if self.particles is not None else 0
+
+    def energy(self) -> dict:
+        """{system name: its named energy terms (J)} for every system that reports any."""
+        return {s.name: e for s in self.coupler.systems if (e := s.energy())}
 
     def system_stats(self) -> dict:
         """{system name: its own step counts}: the particle pool's (``stats``) and each soft

@@ -6,7 +6,19 @@ The core (``engine.ode``, ``particles``, ``springs``, ``colliders``, ``render``,
 """
 
 import os
+import sys
 
 #: the project folder (holding configs/ and renders/) of this checkout
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CONFIGS = os.path.join(ROOT, "configs")
+#: where a wheel (non-editable) install puts the shipped configs (pyproject: data-files)
+INSTALLED_CONFIGS = os.path.join(sys.prefix, "share", "particles-engine", "configs")
+
+
+def shipped_configs():
+    """The folder of the configs shipped with the engine: this checkout's configs/ (a checkout,
+    or an editable install), else the copy a wheel install put under the prefix; None if neither."""
+    for d in (CONFIGS, INSTALLED_CONFIGS):
+        if os.path.isdir(d):
+            return d
+    return None

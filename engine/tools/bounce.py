@@ -178,7 +178,7 @@ def position_error(r, scene: str, drag: bool) -> float:
 def particle_scene(scene: str, drag: bool, solver: dict, contacts: bool = False, fps: int = 60):
     """The same ball as one particle of a :class:`engine.api.ParticleScene` (float32), with the
     scene's ``solver`` table (e.g. ``{"integrator": "rk4", "h": 1/240, "impacts": "projected"}``)."""
-    from ..builder import SceneBuilder
+    from ..api import SceneBuilder
 
     sc = SCENES[scene]
     b = (SceneBuilder(seed=1, fps=fps).solver(**solver)

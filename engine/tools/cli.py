@@ -12,7 +12,6 @@ import sys
 
 from . import budget, flags
 from .errors import EXIT_BROKEN_PIPE, EXIT_OK, SimulationError, UserError
-from .wedge import add_parser as add_wedge_parser
 
 ODE_MAX_STEPS = 10_000_000  # fixed steps run inside one kernel per output interval
 
@@ -70,7 +69,10 @@ def _add_common(p, suppress: bool):
                    help="CPU threads for Taichi kernels (default: all cores); frames do not depend on it")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(extra=()) -> argparse.ArgumentParser:
+    """The command line's parser; ``extra``: functions adding subcommands (``particles wedge``,
+    engine.tools.main), kept out of this module so the wedge's workers can run ``particles run``
+    through :func:`main` without an import circle."""
     ap = flags.Parser(prog="particles", description=__doc__)
     _add_common(ap, suppress=False)
     sub = ap.add_subparsers(dest="command", required=True, parser_class=flags.Parser)
@@ -120,8 +122,13 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("configs", nargs="+")
     v.set_defaults(func=lambda a: _commands().cmd_validate(a), no_taichi=True)
 
+    sc = sub.add_parser("schema", help="print the config schema as JSON Schema (for editors: Taplo, VS Code)")
+    sc.add_argument("--out", default=None, type=T(flags.path), help="write it to this file instead")
+    sc.set_defaults(func=_cmd_schema)
+
     ls = sub.add_parser("list", help="list the configs and effect presets")
-    ls.add_argument("--dir", default="configs", type=T(flags.path))
+    ls.add_argument("--dir", default=None, type=T(flags.path),
+                    help="folder of configs (default: ./configs, else the configs shipped with the engine)")
     ls.set_defaults(func=lambda a: _commands().cmd_list(a), no_taichi=True)
 
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
@@ -155,7 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--frames", type=T(flags.integer(1, 10_000)), default=20)
     pr.set_defaults(func=_cmd_profile, kernel_profiler=True)
 
-    add_wedge_parser(sub)
+    for add in extra:
+        add(sub)
 
     g = sub.add_parser("gallery", help="regenerate the README's stills in renders/gallery/")
     g.add_argument("--out", default=os.path.join("renders", "gallery"), type=T(flags.path))
@@ -165,8 +173,26 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _cmd_schema(args) -> int:
+    from ..config.export import schema_text
+
+    text = schema_text()
+    if args.out is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    tmp = f"{args.out}.tmp"
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, args.out)
+    except OSError as e:
+        raise UserError(f"--out: cannot write {args.out}: {e.strerror or e}") from None
+    print(args.out)
+    return EXIT_OK
+
+
 def _cmd_chart(args) -> int:
-    from .charts import run_charts, selection
+    from .charts import ChartFailed, run_charts, selection
 
     try:
         which = selection(args.only, key="--only")
@@ -176,6 +202,8 @@ def _cmd_chart(args) -> int:
         paths = run_charts(args.out, quick=args.quick, which=which, quiet=args.quiet)
     except ImportError as e:
         raise UserError(str(e)) from None
+    except ChartFailed as e:
+        raise SimulationError(str(e)) from None
     for p in paths:
         print(p)
     return EXIT_OK
@@ -208,10 +236,10 @@ def _commands():
     return commands
 
 
-def main(argv=None) -> int:
+def main(argv=None, extra=()) -> int:
     """Run one command; returns its exit code (README: "Exit codes")."""
     try:
-        return _main(argv)
+        return _main(argv, extra)
     except BrokenPipeError:
         # the reader of stdout went away (`particles list | head -3`): stop quietly, and keep
         # Python's flush at exit from raising again on the closed pipe
@@ -222,12 +250,12 @@ def main(argv=None) -> int:
         return EXIT_BROKEN_PIPE
 
 
-def _main(argv) -> int:
+def _main(argv, extra=()) -> int:
     from .signals import StopRequest
 
     with StopRequest() as stop:
         try:
-            args = build_parser().parse_args(argv)
+            args = build_parser(extra).parse_args(argv)
             if not getattr(args, "no_taichi", False):
                 _init_taichi(args)
             return args.func(args)

@@ -11,6 +11,7 @@ from .errors import OutputFailure, SimulationError, Stopped, UserError
 from ..config import ConfigError, load_config, read_toml
 
 OUTPUT_ROOT = "renders"
+COMPILING = "compiling kernels… (a cold first run takes ~10 s; later runs load them from the cache)"
 
 
 def _overrides(args) -> dict:
@@ -30,10 +31,19 @@ def scene_config(path, args=None):
     data = read_toml(path)
     if data.get("name", "") == "":
         data["name"] = os.path.splitext(os.path.basename(path))[0]
+    overrides = _overrides(args) if args is not None else None
     if getattr(args, "frames", None) is not None:
+        if "duration" in data:  # --frames replaces it, but a duration validate refuses is refused here too
+            probe = {k: v for k, v in data.items() if k != "frames"}
+            try:
+                load_config(probe, overrides)
+            except ConfigError as e:
+                bad = [p for p in e.problems if p.startswith("duration")]
+                if bad:
+                    raise ConfigError(bad) from None
         data.pop("duration", None)
         data["frames"] = args.frames
-    return load_config(data, _overrides(args) if args is not None else None)
+    return load_config(data, overrides)
 
 
 def load_scene_config(path, args):
@@ -56,10 +66,11 @@ def output_dir(cfg, args) -> str:
     return out_dir
 
 
-def _open_output(cfg, args, out_dir) -> int:
-    """Prepare the output folder; returns the first frame to render (> 0 only with --resume)."""
+def _open_output(cfg, args, out_dir):
+    """Lock and prepare the output folder; returns (the first frame to render: > 0 only with
+    --resume, the folder's lock: release it when the run ends)."""
     from .. import runtime
-    from ..render.output import OutputError, OutputRefused, prepare_dir
+    from ..render.output import OutputError, OutputRefused, lock_dir, prepare_dir
     from ..render.resume import prepare_resume, run_record, write_record
 
     if args.resume and args.overwrite:
@@ -68,18 +79,26 @@ def _open_output(cfg, args, out_dir) -> int:
         raise UserError(f"--resume: works for PNG frames only, not --format {args.format} "
                         f"(a partial movie is never kept)")
     record = run_record(cfg, args.format, runtime.ensure_init())
+    lock, existed = None, os.path.isdir(out_dir)
     try:
-        first = prepare_resume(out_dir, record) if args.resume and os.path.isdir(out_dir) else 0
+        lock = lock_dir(out_dir)  # a second run into this folder is refused here
+        first = prepare_resume(out_dir, record) if args.resume and existed else 0
         if first == 0:
             prepare_dir(out_dir, args.overwrite)
         write_record(out_dir, record)
-    except OutputRefused as e:
-        raise UserError(str(e)) from None
-    except OutputError as e:
-        raise OutputFailure(str(e)) from None
-    except OSError as e:
-        raise OutputFailure(f"--out: cannot write to {out_dir}: {e.strerror or e}") from None
-    return first
+    except BaseException as e:
+        if lock is not None:
+            lock.release()
+        if not existed and os.path.isdir(out_dir) and not os.listdir(out_dir):
+            os.rmdir(out_dir)  # refused: leave no new folder
+        if isinstance(e, OutputRefused):
+            raise UserError(str(e)) from None
+        if isinstance(e, OutputError):
+            raise OutputFailure(str(e)) from None
+        if isinstance(e, OSError):
+            raise OutputFailure(f"--out: cannot write to {out_dir}: {e.strerror or e}") from None
+        raise
+    return first, lock
 
 
 def _even_for_mp4(cfg, args) -> None:
@@ -173,10 +192,7 @@ def render_frames(scene, writer, first: int, total: int, stop=None, bar=None):
 def cmd_run(args) -> int:
     """``particles run``: checks (flags, config, MP4 sizes, output folder, budgets) before any
     work, then simulates every frame and renders from the first one not on disk."""
-    from ..render.output import FrameWriter, default_workers
-    from ..scene import Scene
-    from .progress import progress
-    from .signals import stopping
+    from ..render.output import default_workers
 
     flags.check(args, flags.RUN_FLAGS)
     if not getattr(args, "format", None):
@@ -187,7 +203,20 @@ def cmd_run(args) -> int:
     workers = getattr(args, "workers", None) or default_workers()
     check_budget(cfg, args, workers)
     total = cfg.frame_count
-    first = _open_output(cfg, args, out_dir)
+    first, lock = _open_output(cfg, args, out_dir)
+    try:
+        return _run(cfg, args, out_dir, workers, total, first)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _run(cfg, args, out_dir, workers, total, first) -> int:
+    from ..render.output import FrameWriter
+    from ..scene import Scene
+    from .progress import progress
+    from .signals import stopping
+
     if first >= total:
         print(f"{cfg.name}: nothing to resume: {out_dir} already holds {first} whole frame(s) of "
               f"{total}")
@@ -198,6 +227,8 @@ def cmd_run(args) -> int:
     writer = FrameWriter(out_dir, args.format, cfg.fps, cfg.name, workers=workers)
     with stopping(raise_now=False) as stop:
         with progress(total, unit="frames", label=cfg.name, quiet=getattr(args, "quiet", False)) as bar:
+            # the first frame compiles every kernel of the scene (~10 s cold; ~1 s from the cache)
+            bar.update(0, note=COMPILING)
             failure, out_failure = render_frames(scene, writer, first, total, stop, bar)
     wall = time.perf_counter() - t_start
     st = scene.stats
@@ -247,10 +278,18 @@ def cmd_validate(args) -> int:
 def cmd_list(args) -> int:
     from effects import PRESETS
 
+    from . import shipped_configs
+
     root = args.dir
+    if root is None:  # ./configs (a checkout), else the configs shipped with the engine
+        root = "configs" if os.path.isdir("configs") else shipped_configs()
+        if root is None:
+            raise UserError(f"--dir: no configs/ folder in {os.getcwd()} and none shipped with this "
+                            f"install; pass --dir FOLDER")
     if not os.path.isdir(root):
         raise UserError(f"--dir: {root!r} is not a folder")
-    print(f"configs in {root}/:")
+    print(f"configs in {root}/:" + ("" if root == "configs" else "  (run one: particles run "
+                                     f"{os.path.join(root, '<name>.toml')})"))
     for path in sorted(glob.glob(os.path.join(root, "*.toml"))):
         try:
             cfg = load_config(path)

@@ -63,14 +63,42 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
     require_scipy()
     names = selection(which)
     os.makedirs(out_dir, exist_ok=True)
-    jobs = _jobs(names, out_dir, quick)
+    labels = [label for label, _job in _jobs(names, out_dir, quick)]
     written: List[str] = []
-    with progress(len(jobs), unit="charts", label="particles chart", quiet=quiet) as bar:
-        for label, job in jobs:
+    with progress(len(labels), unit="charts", label="particles chart", quiet=quiet) as bar:
+        for k, label in enumerate(labels):
             bar.advance(0, note=label)
-            written += job()
+            written += _run_child(k, label, names, out_dir, quick)
             bar.advance(note=label)
     return written
+
+
+class ChartFailed(RuntimeError):
+    """A chart's child process failed (a crash, a signal, an error): one line naming the chart."""
+
+
+def _run_child(k, label, names, out_dir, quick) -> List[str]:
+    """Run job ``k`` in a child process and return the paths it wrote. Each chart builds many
+    scenes and Taichi's CPU backend holds at most 512 field trees per process (engine.runtime):
+    a fresh process per chart never reaches that, and a crash in one (a segmentation fault) is
+    reported in one line instead of killing the command without a word."""
+    import signal
+    import subprocess
+
+    cmd = [sys.executable, "-m", "engine.tools.charts", "--out", os.fspath(out_dir), "--job", str(k)]
+    cmd += [a for n in names for a in ("--only", n)] + (["--quick"] if quick else [])
+    r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if r.returncode != 0:
+        if r.returncode < 0:
+            try:
+                why = f"crashed ({signal.Signals(-r.returncode).name})"
+            except ValueError:
+                why = f"crashed (signal {-r.returncode})"
+        else:
+            last = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
+            why = f"failed: {last[-1].strip()}" if last else f"failed (exit {r.returncode})"
+        raise ChartFailed(f"the {label} chart {why}; the charts before it are written")
+    return [ln for ln in r.stdout.splitlines() if ln.strip()]
 
 
 def _chart(out_dir, stem, rows, fields, draw):
@@ -148,14 +176,22 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=os.path.join("renders", "charts"))
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", action="append", default=None, metavar="NAME")
+    ap.add_argument("--job", type=int, default=None, help=argparse.SUPPRESS)  # one chart, in this process
     args = ap.parse_args(argv)
     try:
+        if args.job is not None:
+            from ...runtime import ensure_init
+
+            ensure_init()  # a chart's child process: some jobs allocate fields before any scene does
+            for p in _jobs(selection(args.only), args.out, args.quick)[args.job][1]():
+                print(p)
+            return 0
         for p in run_charts(args.out, quick=args.quick, which=args.only):
             print(p)
-    except (ValueError, ImportError) as e:
+    except (ValueError, ImportError, ChartFailed) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0
 
 
-__all__ = ["run_charts", "selection", "main", "CHARTS"]
+__all__ = ["run_charts", "selection", "main", "CHARTS", "ChartFailed"]

@@ -1,4 +1,4 @@
-"""The ``particles wedge`` subcommand's arguments (registered by ``engine.tools.cli``)."""
+"""The ``particles wedge`` subcommand's arguments (registered by ``engine.tools.main``)."""
 from __future__ import annotations
 
 import argparse

@@ -91,13 +91,47 @@ class Farm:
         return _dask().as_completed(futures)
 
     def close(self) -> None:
-        try:
-            self.client.unsubscribe_topic(TOPIC)
-        except Exception:  # pragma: no cover - closing anyway
-            pass
-        self.client.close()
+        """Stop the client (and the local cluster). Teardown is silenced: connections closing
+        in any order make Dask log ``CommClosedError`` tracebacks (at ERROR, from the client, the
+        scheduler, the workers and their nannies) on a wedge that succeeded; every result is in
+        by now, so nothing they could say matters. The workers and nannies are told first (a
+        local cluster's; a shared cluster's workers are not ours to quieten)."""
         if self.cluster is not None:
-            self.cluster.close()
+            for nanny in (False, True):
+                try:
+                    self.client.run(_quiet, nanny=nanny)
+                except Exception:  # a worker already gone, an older Dask: closing anyway
+                    pass
+        with _quiet_logs():
+            try:
+                self.client.unsubscribe_topic(TOPIC)
+            except Exception:  # pragma: no cover - closing anyway
+                pass
+            self.client.close()
+            if self.cluster is not None:
+                self.cluster.close()
+
+
+TEARDOWN_LOGGERS = ("distributed", "tornado", "asyncio")
+
+
+def _quiet() -> None:
+    """In a worker or nanny about to be closed: nothing of its teardown is logged."""
+    for name in TEARDOWN_LOGGERS:
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+class _quiet_logs:
+    """This process's Dask, Tornado and asyncio loggers off from the farm's shutdown on: the
+    tracebacks of connections closing come during it and from callbacks that run after it, at
+    interpreter exit (the wedge is over: its results and errors are reported by then)."""
+
+    def __enter__(self):
+        _quiet()
+        return self
+
+    def __exit__(self, *exc):
+        return False
 
 
 def failure_of(future) -> dict:

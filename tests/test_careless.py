@@ -1,0 +1,619 @@
+"""Issue 20: careless users. Each case works, or fails in one line naming the method, argument,
+flag or config key and the value, and a refused call changes nothing."""
+import mmap
+import os
+
+import numpy as np
+import pytest
+
+from engine import checks
+
+
+def _one_line(e):
+    text = str(e.value)
+    assert "\n" not in text and len(text) < 400, text
+    return text
+
+
+# -- render(out=...) ---------------------------------------------------------------------------------
+def test_render_out_refuses_read_only_arrays(tmp_path):
+    ro = np.zeros((36, 64, 4), np.uint8)
+    ro.flags.writeable = False
+    over_bytes = np.frombuffer(bytes(36 * 64 * 4), np.uint8).reshape(36, 64, 4)
+    path = tmp_path / "img.raw"
+    path.write_bytes(bytes(36 * 64 * 4))
+    mm = np.memmap(path, np.uint8, mode="r", shape=(36, 64, 4))
+    for a in (ro, over_bytes, mm):
+        with pytest.raises(ValueError) as e:
+            checks.image_array("render: out", a, 64, 36)
+        text = _one_line(e)
+        assert text.startswith("render: out") and "read-only" in text and "writeable" in text, text
+    checks.image_array("render: out", np.zeros((36, 64, 4), np.uint8), 64, 36)  # a writeable one is fine
+
+
+def test_render_out_names_the_property_that_failed():
+    base = np.zeros((36, 128, 4), np.uint8)
+    cases = [(base[:, ::2], "C-contiguous"), (np.zeros((36, 64, 3), np.uint8), "shape"),
+             (np.zeros((36, 64, 4), np.float32), "dtype"), (np.zeros((64, 36, 4), np.uint8), "shape")]
+    for a, prop in cases:
+        with pytest.raises(ValueError) as e:
+            checks.image_array("render: out", a, 64, 36)
+        text = _one_line(e)
+        assert text.startswith("render: out: " + ("the array is not" if prop == "C-contiguous" else prop)), text
+        assert prop in text, text
+
+
+def test_render_into_a_read_only_array_changes_nothing():
+    from engine.api import SceneBuilder
+
+    s = (SceneBuilder(seed=1, fps=60).render(width=32, height=32)
+         .emitter(name="e", rate=200.0, lifetime=1.0).build())
+    s.step(1 / 60)
+    buf = bytearray(32 * 32 * 4)
+    ro = np.frombuffer(bytes(buf), np.uint8).reshape(32, 32, 4)
+    before = ro.tobytes()
+    with pytest.raises(ValueError, match=r"^render: out: .*read-only"):
+        s.render(32, 32, out=ro)
+    assert ro.tobytes() == before
+    ok = np.empty((32, 32, 4), np.uint8)
+    assert s.render(32, 32, out=ok) is not None
+    s.close()
+
+
+# -- a burst shares the pool with the stream ----------------------------------------------------------
+def _stream_and_burst(render=False):
+    from engine.api import SceneBuilder
+
+    return (SceneBuilder(fps=60, seed=1).render(width=32, height=32)
+            .emitter(name="sparks", rate=400.0, lifetime=1.2, lifetime_randomness=0.5, speed=(1.0, 2.0))
+            .build(render=render))
+
+
+def test_a_burst_does_not_starve_the_stream_while_the_segment_has_free_slots():
+    """The README's game example: after burst(200) every birth takes a free slot of the emitter's
+    segment; a particle is dropped only when the segment is full (before: the ring's head waited
+    on long-lived burst particles and ~300 births were dropped with ~300 slots free)."""
+    s = _stream_and_burst()
+    ps = s.scene.particles
+    em, size = ps.emitters, ps.layout.sizes[0]
+    stream_born = 0
+    for i in range(200):
+        if i == 60:
+            s.burst("sparks", 200)
+        free = size - int(ps.state.particle_alive.to_numpy()[:size].sum())
+        e0, d0 = int(em.emitted_counts()[0]), s.dropped()
+        s.step(1 / 120)
+        born, dropped = int(em.emitted_counts()[0]) - e0, s.dropped() - d0
+        assert born == min(born + dropped, free), (i, born, dropped, free)
+        if i > 60:
+            stream_born += born
+    assert stream_born > 0.9 * 400 * 139 / 120 * 0.6, stream_born
+    s.close()
+
+
+SLOT_PROBE = """
+import hashlib, sys
+sys.path[:0] = [".", "tests"]
+from engine import runtime
+runtime.init("cpu", threads=int(sys.argv[1]))
+from test_careless import _stream_and_burst
+s = _stream_and_burst()
+for i in range(150):
+    if i in (30, 60):
+        s.burst("sparks", 200)
+    s.step(1 / 120)
+S = s.scene.particles.state
+h = hashlib.sha256()
+for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive", "particle_emitter"):
+    h.update(getattr(S, f).to_numpy().tobytes())
+print(h.hexdigest(), s.dropped(), *s.scene.particles.emitters.emitted_counts())
+"""
+
+
+@pytest.mark.slow
+def test_births_moved_to_free_slots_are_the_same_bytes_for_any_thread_count(tmp_path):
+    import subprocess
+    import sys
+
+    script = tmp_path / "probe.py"
+    script.write_text(SLOT_PROBE)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    runs = [subprocess.run([sys.executable, str(script), str(n)], cwd=root, capture_output=True, text=True)
+            for n in (1, 2, 2)]
+    assert all(r.returncode == 0 for r in runs), [r.stderr[-1500:] for r in runs]
+    out = [r.stdout.split() for r in runs]
+    assert out[0] == out[1] == out[2], out
+
+
+# -- names ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("bad", [" ", "\t", "a\nb", "nul\x00", " lead", "trail ", "\x7f"])
+def test_emitter_names_must_be_printable_and_not_blank(bad):
+    from engine.config import ConfigError, load_config
+
+    with pytest.raises(ConfigError) as e:
+        load_config({"emitters": [{"name": "ok", "rate": 1.0}, {"name": bad, "rate": 1.0}]})
+    assert len(e.value.problems) == 1, e.value.problems
+    line = e.value.problems[0]
+    assert line.startswith("emitters[1].name: ") and "\n" not in line, line
+    for kind in ("colliders", "bodies"):
+        item = {"name": bad, "type": "plane"} if kind == "colliders" else {"name": bad, "type": "chain"}
+        with pytest.raises(ConfigError, match=rf"{kind}\[0\]\.name"):
+            load_config({"emitters": [{"rate": 1.0}], kind: [item]})
+
+
+def test_an_empty_name_reaches_nothing():
+    from engine.config import ConfigError, load_config
+
+    load_config({"emitters": [{"rate": 1.0}, {"name": "", "rate": 1.0}]})  # unnamed: allowed
+    with pytest.raises(ConfigError, match=r"emitters\[0\]\.sub_emitters\[0\]\.emitter: '' is not allowed"):
+        load_config({"emitters": [{"name": "a", "rate": 1.0, "sub_emitters": [{"emitter": ""}]}, {"rate": 1.0}]})
+    with pytest.raises(KeyError, match="burst: name: no emitter named ''"):
+        checks.name("burst: name", "", ["", "sparks"], "emitter")
+
+
+# -- FixedTimestep and step() ---------------------------------------------------------------------------
+class _Flaky:
+    """A scene whose third step raises."""
+
+    def __init__(self, fail_at=3):
+        self.steps, self.fail_at = 0, fail_at
+
+    def step(self, dt):
+        self.steps += 1
+        if self.steps == self.fail_at:
+            raise RuntimeError("boom")
+
+
+def test_fixed_timestep_after_a_raise_runs_no_burst_of_steps():
+    from engine.api import FixedTimestep
+
+    clock, scene = FixedTimestep(0.01), _Flaky()
+    with pytest.raises(RuntimeError, match="boom"):
+        clock.advance(scene, 0.16)  # 16 steps due; the third raises
+    assert scene.steps == 3
+    assert clock.advance(scene, 0.01) == 1  # one frame's worth, not the 13 left over
+    assert scene.steps == 4 and 0.0 <= clock.alpha < 1.0
+
+
+@pytest.mark.parametrize("dt", [1e-9, 1e-12, 5e-324, 9.99e-7])
+def test_fixed_timestep_refuses_a_tiny_dt(dt):
+    from engine.api import FixedTimestep
+
+    with pytest.raises(ValueError) as e:
+        FixedTimestep(dt)
+    text = _one_line(e)
+    assert text.startswith("FixedTimestep: dt: ") and repr(dt) in text and "1e-06" in text, text
+    assert FixedTimestep(1e-6).dt == 1e-6
+
+
+def test_huge_numbers_are_refused_in_one_line_naming_the_argument():
+    with pytest.raises(ValueError) as e:
+        checks.number("step: dt", 10**400, 0.0, lo_open=True)
+    text = _one_line(e)
+    assert text.startswith("step: dt: ") and "not allowed" in text, text
+    with pytest.raises(ValueError, match="^step: dt: "):
+        checks.number("step: dt", -10**400, 0.0, lo_open=True)
+
+
+def test_step_of_a_huge_int_names_dt():
+    from engine.api import SceneBuilder
+
+    s = SceneBuilder(fps=60).emitter(name="e", rate=10.0).build(render=False)
+    with pytest.raises(ValueError) as e:
+        s.step(10**400)
+    assert _one_line(e).startswith("step: dt: ")
+    assert s.time == 0.0
+    s.close()
+
+
+# -- long keyframe paths -----------------------------------------------------------------------------
+def _path(n, bad_at=None):
+    keys = [{"time": i * 0.001, "position": [0.0, 1.0, i * 1e-6]} for i in range(n)]
+    if bad_at is not None:
+        keys[bad_at]["time"] = 0.0
+    return keys
+
+
+def test_an_out_of_order_keyframe_is_one_short_line_in_validate_and_from_dict():
+    from engine.api import ParticleScene
+    from engine.config import ConfigError, load_config
+
+    data = {"emitters": [{"rate": 1.0, "path": _path(50_000, bad_at=31_337)}],
+            "colliders": [{"type": "sphere", "path": _path(20_000, bad_at=7)}],
+            "bodies": [{"type": "chain", "pins": [0], "pin_path": _path(10, bad_at=9)}]}
+    with pytest.raises(ConfigError) as e:
+        load_config(data)
+    problems = e.value.problems
+    assert len(problems) == 3, problems
+    assert all(len(p) < 200 and "\n" not in p for p in problems), problems
+    by_key = {p.split(": ", 1)[0]: p for p in problems}
+    assert by_key["emitters[0].path"].startswith(
+        "emitters[0].path: keyframe times must increase: keyframe 31337 has time 0,"), problems
+    assert "keyframe 7 " in by_key["colliders[0].path"], problems
+    assert "keyframe 9 " in by_key["bodies[0].pin_path"], problems
+    with pytest.raises(ValueError) as e:
+        ParticleScene.from_dict({"emitters": data["emitters"]}, render=False)
+    assert len(str(e.value)) < 300 and "keyframe 31337" in str(e.value), str(e.value)[:500]
+    assert e.value.__cause__ is None and e.value.__suppress_context__
+
+
+def test_a_long_path_is_read_once_not_every_step():
+    import time
+
+    from engine.config import load_config
+    from engine.control import Control
+    from engine.paths import Path, sample_path
+
+    cfg = load_config({"emitters": [{"rate": 1.0, "path": _path(100_000)}]})
+    ems, _ = Control.inputs_for(cfg, [])
+    assert isinstance(ems[0].path, Path) and len(ems[0].path.times) == 100_000
+    t0 = time.perf_counter()
+    for k in range(500):
+        p = ems[0].position_at(k * 0.17)
+    assert time.perf_counter() - t0 < 0.5  # ~30 ms a call when the keyframes were re-read
+    assert p.tolist() == pytest.approx([0.0, 1.0, 499 * 0.17 * 1e-3], abs=1e-9)
+    short = [(0.0, (0.0, 0.0, 0.0)), (1.0, (2.0, 0.0, 0.0))]
+    assert sample_path(short, 0.25, (9, 9, 9)).tolist() == [0.5, 0.0, 0.0]
+    assert sample_path(Path(short), 0.25, (9, 9, 9)).tolist() == [0.5, 0.0, 0.0]
+    assert sample_path([], 0.25, (9, 9, 9)).tolist() == [9, 9, 9]
+
+
+# -- deep data ------------------------------------------------------------------------------------
+def _deep(n):
+    d = x = {}
+    for _ in range(n):
+        x["a"] = {}
+        x = x["a"]
+    return d
+
+
+def test_a_100k_deep_dict_is_one_line_not_a_recursion_error():
+    from engine.api import ParticleScene
+
+    deep = _deep(100_000)
+    with pytest.raises(ValueError) as e:
+        ParticleScene.from_dict(deep, render=False)
+    assert _one_line(e).startswith("ParticleScene: config: ") and "32 levels" in str(e.value)
+    with pytest.raises(ValueError, match="^ParticleScene: config: .*32 levels"):
+        ParticleScene.from_dict({"emitters": [{"rate": 1.0, "path": [deep]}]}, render=False)
+    nested_list = x = []
+    for _ in range(100_000):
+        x.append([])
+        x = x[0]
+    with pytest.raises(ValueError, match="^ParticleScene: config: .*32 levels"):
+        ParticleScene.from_dict({"emitters": nested_list}, render=False)
+
+
+# -- interpolate=True ----------------------------------------------------------------------------
+@pytest.mark.slow  # (two scene builds: ~10 s cold)
+def test_interpolate_changes_no_byte_where_positions_are_equal():
+    from engine.api import SceneBuilder
+
+    def make(interp):
+        return (SceneBuilder(fps=60, seed=3).render(width=96, height=64)
+                .forces(gravity=(0.0, -9.81, 0.0))
+                .emitter(name="e", effect="sparks", rate=300.0, position=[0.0, 1.0, 0.0])
+                .emitter(name="s", effect="smoke", rate=60.0, position=[0.3, 0.5, 0.0])
+                .collider(type="plane", name="ground", restitution=0.4)
+                .build(interpolate=interp))
+
+    a, b = make(False), make(True)
+    for _ in range(30):
+        a.step(1 / 60)
+        b.step(1 / 60)
+    for kw in ({}, {"transparent": True}, {"bgra": True}):
+        want = a.render(**kw)
+        assert np.array_equal(b.render(**kw), want), kw  # drawn where they are: no alpha
+        assert np.array_equal(b.render(alpha=1.0, **kw), want), kw
+    b.scene.save_positions()  # the last step's positions = the current ones: every alpha draws them
+    for alpha in (0.0, 0.37, 0.5, 1.0):
+        assert np.array_equal(b.render(alpha=alpha), a.render()), alpha
+    a.close()
+    b.close()
+
+
+# -- particles run: the output folder and --frames ----------------------------------------------------
+SPARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "configs", "sparks.toml")
+
+
+def _call(*argv):
+    import sys
+
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from runhelp import call
+
+    return call(*argv)
+
+
+def test_a_second_run_into_a_locked_folder_is_refused_in_one_line(tmp_path):
+    from engine.render.output import LOCK, lock_dir
+
+    out = tmp_path / "out"
+    held = lock_dir(str(out))  # a first run, still writing
+    try:
+        code, stdout, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", out, "--quiet")
+        assert code == 2, stderr
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: --out: {out} is being written by another "
+                                                       f"particles run (pid {os.getpid()})"), stderr
+        assert os.listdir(out) == [LOCK]  # the second run wrote nothing
+        code, _, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", out, "--resume",
+                                "--quiet")
+        assert code == 2 and "another particles run" in stderr, stderr
+    finally:
+        held.release()
+    assert os.listdir(out) == []  # the lock file goes with the run that held it
+    again = lock_dir(str(out))  # and the folder can be locked again
+    again.release()
+
+
+@pytest.mark.slow
+def test_two_runs_into_one_folder_the_second_is_refused(tmp_path):
+    import subprocess
+    import sys
+    import time
+
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from runhelp import command
+
+    out = tmp_path / "out"
+    cmd, kw = command("run", SPARKS, "--frames", "400", "--size", "64x36", "--out", out, "--quiet")
+    first = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+    try:
+        deadline = time.monotonic() + 240
+        while not (out / ".particles-run.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert (out / ".particles-run.json").exists()
+        code, _, stderr = _call("run", SPARKS, "--frames", "3", "--size", "80x40", "--seed", "9", "--out", out,
+                                "--overwrite", "--quiet")
+        assert code == 2 and f"pid {first.pid}" in stderr, stderr
+    finally:
+        first.terminate()
+        first.wait(60)
+    assert first.returncode in (0, 143), first.stderr.read()
+    assert not (out / ".particles-run.lock").exists()  # the first run's lock went with it
+
+
+def test_resume_refuses_a_mixed_folder(tmp_path):
+    from engine.config import load_config
+    from engine.render.output import OutputRefused, encode_png, frame_path
+    from engine.render.resume import prepare_resume, run_record, write_record
+
+    cfg = load_config(SPARKS, {"render.width": 64, "render.height": 36})
+    out = str(tmp_path)
+    record = run_record(cfg, "png", "cpu")
+    write_record(out, record)
+    for k, (w, h) in enumerate([(64, 36), (64, 36), (80, 40), (64, 36)]):  # another run's frame 2
+        with open(frame_path(out, k), "wb") as fh:
+            fh.write(encode_png(np.zeros((h, w, 3), np.uint8)))
+    with pytest.raises(OutputRefused) as e:
+        prepare_resume(out, record)
+    text = _one_line(e)
+    assert text.startswith(f"--resume: {out} is mixed: frame_00002.png is 80x40, this run renders 64x36"), text
+    assert len(os.listdir(out)) == 5  # nothing removed
+    os.remove(frame_path(out, 2))
+    assert prepare_resume(out, record) == 2  # a gap: whole frames 0..1 kept, the one after it dropped
+
+
+def test_out_at_a_symlink_loop_says_so(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    os.symlink(b, a)
+    os.symlink(a, b)
+    for out in (a, a / "sub"):
+        code, _, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", out, "--quiet")
+        assert code == 4, stderr
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and f"{a} is a symbolic link loop" in lines[0], stderr
+        assert "File exists" not in stderr
+    dangling = tmp_path / "gone"
+    os.symlink(tmp_path / "nowhere" / "x", dangling)
+    code, _, stderr = _call("run", SPARKS, "--frames", "1", "--size", "64x36", "--out", dangling, "--quiet")
+    assert code == 4 and "which does not exist" in stderr, stderr
+
+
+def test_run_frames_refuses_a_duration_that_validate_refuses(tmp_path):
+    for duration, why in (("7200", "less than or equal to 3600"), ("0", "greater than 0"), ('"x"', "number")):
+        cfg = tmp_path / "d.toml"
+        cfg.write_text(f"fps = 30\nduration = {duration}\n[[emitters]]\nrate = 10.0\n")
+        code, stdout, _ = _call("validate", cfg)
+        assert code == 2 and f"duration: {duration.strip(chr(34))!s}" in stdout.replace("'", ""), stdout
+        code, _, stderr = _call("run", cfg, "--frames", "1", "--size", "64x36", "--out", tmp_path / "o", "--quiet")
+        assert code == 2, stderr
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and f"{cfg}: duration: " in lines[0] and why in lines[0], stderr
+        assert not (tmp_path / "o").exists()
+
+
+# -- threads --------------------------------------------------------------------------------------------
+def _in_thread(fn):
+    import threading
+
+    box = {}
+
+    def run():
+        try:
+            box["value"] = fn()
+        except BaseException as e:  # noqa: BLE001 - handed back to the test
+            box["error"] = e
+
+    t = threading.Thread(target=run, name="loader")
+    t.start()
+    t.join(60)
+    return box
+
+
+def test_calls_from_a_second_thread_are_refused_in_one_line_and_change_nothing():
+    from engine import runtime
+    from engine.api import ParticleScene, SceneBuilder
+
+    s = SceneBuilder(fps=60, seed=2).emitter(name="e", rate=300.0).build(render=False)
+    s.step(1 / 60)
+    before = (s.time, s.particles()["position"].tobytes(), s.live_count())
+    calls = {"step": lambda: s.step(1 / 60), "burst": lambda: s.burst("e", 5),
+             "particles": lambda: s.particles(), "ParticleScene": lambda: ParticleScene.from_dict(
+                 {"emitters": [{"rate": 5.0}]}, render=False),
+             "engine.runtime.init": lambda: runtime.init("cpu"),
+             "engine.runtime.reset": lambda: runtime.reset()}
+    for where, fn in calls.items():
+        box = _in_thread(fn)
+        err = box.get("error")
+        assert isinstance(err, runtime.WrongThread), (where, box)
+        text = str(err)
+        assert "\n" not in text and text.startswith(f"{where}: called from thread 'loader'"), text
+        assert "MainThread" in text, text
+    assert (s.time, s.particles()["position"].tobytes(), s.live_count()) == before
+    s.step(1 / 60)  # the owning thread goes on
+    s.close()
+
+
+LOADER_PROBE = """
+import sys, threading
+sys.path[:0] = ["."]
+from engine.api import ParticleScene
+box = {}
+def load():
+    box["scene"] = ParticleScene.from_dict({"emitters": [{"name": "e", "rate": 50.0}]}, render=False)
+    box["scene"].step(1 / 60)
+t = threading.Thread(target=load, name="loading")
+t.start(); t.join()
+try:
+    box["scene"].step(1 / 60)
+except RuntimeError as e:
+    print("refused:", e)
+"""
+
+
+@pytest.mark.slow
+def test_a_loading_thread_that_built_first_owns_the_engine(tmp_path):
+    import subprocess
+    import sys
+
+    script = tmp_path / "probe.py"
+    script.write_text(LOADER_PROBE)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    r = subprocess.run([sys.executable, str(script)], cwd=root, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.startswith("refused: step: called from thread 'MainThread', but Taichi was initialised on "
+                               "thread 'loading'"), r.stdout
+
+
+# -- after engine.runtime.reset() (keep last: it ends this module's program) -----------------------------
+def test_zz_a_scene_used_after_runtime_reset_says_so_in_one_line():
+    from engine import runtime
+    from engine.api import SceneBuilder
+
+    s = SceneBuilder(fps=60).emitter(name="e", rate=10.0).build(render=False)
+    s.step(1 / 60)
+    runtime.reset()
+    try:
+        for call in (lambda: s.step(1 / 60), lambda: s.particles(), lambda: s.render(32, 32),
+                     lambda: s.burst("e", 1), lambda: s.time):
+            with pytest.raises(RuntimeError) as e:
+                call()
+            assert "engine.runtime.reset()" in _one_line(e)
+        s.close()  # closing a dead scene is harmless
+    finally:
+        runtime.init("cpu")
+
+
+# -- particles wedge teardown -------------------------------------------------------------------------
+def test_the_farm_shuts_down_with_dask_teardown_logs_silenced():
+    import logging
+
+    pytest.importorskip("distributed")
+    from engine.tools.wedge import farm
+
+    seen = {}
+
+    class FakeClient:
+        def run(self, fn, nanny=False):
+            seen.setdefault("run", []).append((fn, nanny))
+
+        def unsubscribe_topic(self, topic):
+            pass
+
+        def close(self):
+            seen["client"] = logging.getLogger("distributed").getEffectiveLevel()
+
+    class FakeCluster:
+        def close(self):
+            seen["cluster"] = {n: logging.getLogger(n).getEffectiveLevel() for n in ("distributed", "tornado",
+                                                                                     "asyncio")}
+
+    f = object.__new__(farm.Farm)
+    f.client, f.cluster = FakeClient(), FakeCluster()
+    levels = {n: logging.getLogger(n).level for n in ("distributed", "tornado", "asyncio")}
+    try:
+        f.close()
+        assert seen["client"] > logging.CRITICAL
+        assert all(v > logging.CRITICAL for v in seen["cluster"].values()), seen
+        assert [nanny for _, nanny in seen["run"]] == [False, True]  # workers and nannies quietened first
+        fn = seen["run"][0][0]
+        fn()
+        assert logging.getLogger("distributed").getEffectiveLevel() > logging.CRITICAL
+    finally:
+        for n, level in levels.items():
+            logging.getLogger(n).setLevel(level)
+
+
+def test_the_progress_display_says_the_first_frame_compiles(tmp_path, monkeypatch):
+    import contextlib
+
+    from engine.tools import commands, progress
+
+    notes = []
+
+    class Bar:
+        def advance(self, n=1, note=""):
+            notes.append(("advance", note))
+
+        def update(self, completed, note=""):
+            notes.append(("update", note))
+
+    @contextlib.contextmanager
+    def fake(total, unit="items", label="", quiet=False, stream=None):
+        yield Bar()
+
+    monkeypatch.setattr(progress, "progress", fake)
+    code, _, stderr = _call("run", SPARKS, "--frames", "2", "--size", "64x36", "--out", tmp_path / "o")
+    assert code == 0, stderr
+    assert notes[0] == ("update", commands.COMPILING) and "compiling kernels" in notes[0][1]
+    assert notes[1][0] == "advance" and "compiling" not in notes[1][1]  # gone after the first frame
+
+
+# -- particles list outside the checkout ----------------------------------------------------------------
+def test_list_works_outside_the_checkout(tmp_path, monkeypatch):
+    import shutil
+
+    import engine.tools as tools
+
+    monkeypatch.chdir(tmp_path)  # no configs/ here
+    code, stdout, stderr = _call("list")
+    assert code == 0, stderr
+    assert stdout.splitlines()[0].startswith(f"configs in {tools.CONFIGS}/:") and "sparks.toml" in stdout
+    # a wheel install: the configs under the prefix (pyproject's data-files)
+    installed = tmp_path / "share" / "particles-engine" / "configs"
+    installed.mkdir(parents=True)
+    shutil.copy(SPARKS, installed / "sparks.toml")
+    monkeypatch.setattr(tools, "CONFIGS", str(tmp_path / "no-checkout"))
+    monkeypatch.setattr(tools, "INSTALLED_CONFIGS", str(installed))
+    code, stdout, stderr = _call("list")
+    assert code == 0 and f"configs in {installed}/:" in stdout and "sparks.toml" in stdout, stdout + stderr
+    monkeypatch.setattr(tools, "INSTALLED_CONFIGS", str(tmp_path / "none"))
+    code, stdout, stderr = _call("list")
+    assert code == 2 and stderr.count("\n") == 1 and stderr.startswith("error: --dir: no configs/ folder in "), stderr
+
+
+def test_the_wheel_ships_the_configs():
+    try:
+        import tomllib
+    except ImportError:  # Python < 3.11
+        import tomli as tomllib
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    with open(os.path.join(root, "pyproject.toml"), "rb") as fh:
+        py = tomllib.load(fh)
+    assert py["tool"]["setuptools"]["data-files"]["share/particles-engine/configs"] == ["configs/*.toml"]
+    from engine.tools import INSTALLED_CONFIGS
+
+    assert INSTALLED_CONFIGS.endswith(os.path.join("share", "particles-engine", "configs"))
