@@ -3,10 +3,11 @@
 Layout follows a Model (fixed topology and parameters) / State (positions, velocities) / Control
 (gravity, collider positions: engine.control) split: :mod:`.topology` (numpy builders),
 :mod:`.model` (fields, CSR adjacency, edge colouring), :mod:`.forces` (gather and atomic
-accumulation), :mod:`.xpbd`, :mod:`.constraints` (pins, collisions), :mod:`.limits` (stretch caps),
+accumulation of the Hooke term of engine.forces.terms), :mod:`.constraints` (pins, collisions), :mod:`.limits` (stretch caps),
 :mod:`.stability` (the stiffness guard), :mod:`.energy`, :mod:`.system`. The explicit methods and
 step doubling are the ODE core's, staged over the network's fields (engine.ode.staged), and the
-steps are chosen by its driver (engine.ode.driver).
+steps are chosen by its driver (engine.ode.driver); XPBD is engine.xpbd's loop over the springs and
+the body's energy terms (engine.forces.elements).
 """
 from .energy import write_energy_csv
 from .stability import StiffnessError
