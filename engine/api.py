@@ -328,6 +328,15 @@ class ParticleScene(RigidAPI):
         b = self._body("release", body)
         self.scene.control.release(b.index, self._node("release", b, node))
 
+    def add_energy(self, body: str, energy, nodes, params=None, name: str = "user") -> None:
+        """Attach a user energy to soft body ``body``: ``energy`` a ``@ti.func`` (x, p) → ψ (J) of
+        an element's k nodes (x: 3 × k matrix of positions, m; p: its row of ``params``),
+        ``nodes`` (E, k) node indices. Forces are −∇ψ by Taichi autodiff, deterministic
+        (engine.forces.user); the energy is reported under ``name`` by :meth:`energy`. A k = 1
+        energy over every node is an external potential U(x) (a well, a terrain). Kept until the
+        scene is rebuilt (add_body, remove_body…)."""
+        self._body("add_energy", body).add_energy(energy, nodes, params, name)
+
     # -- read-back --------------------------------------------------------------------------------
     def particles(self) -> dict:
         """Live particles as NumPy arrays (copies; Taichi fields are not shared memory on every
@@ -352,7 +361,8 @@ class ParticleScene(RigidAPI):
         return self._body("body_positions", name).positions()
 
     def energy(self) -> dict:
-        """Per soft body: kinetic, gravitational and spring energy (J)."""
+        """Per soft body: kinetic, gravitational and every energy term by name (spring, bending,
+        area, volume, the solid's material, user energies) and their total (J)."""
         return {b.cfg.name or f"body{k}": b.energy() for k, b in enumerate(self._live("energy").bodies)}
 
     def contacts(self, min_speed: float = 0.0, body: str | None = None) -> Contacts:

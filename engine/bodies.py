@@ -7,15 +7,48 @@ import math
 import numpy as np
 
 from .colliders import Colliders
+from .forces.terms import lame
 from .paths import Path, sample_path
-from .springs import SpringSystem, chain, cloth, hair, jelly, line_roots, scalp_roots
-from .springs.topology import STRUCTURAL
+from .springs import SpringSystem, Topology, chain, cloth, hair, jelly, line_roots, scalp_roots, solid
+from .springs.topology import STRUCTURAL, hinges
 from .system import SystemBase
 
 
+def _term(b, kind):
+    return next((t for t in (b.energies or []) if t.type == kind), None)
+
+
 def build_topology(b):
-    """The spring network a config Body describes."""
-    kw = dict(mass=b.mass, ks=b.stiffness, kd=b.damping)
+    """The node network a config Body describes: its springs (none when ``energies`` lists no
+    ``spring``; a ``spring`` term's stiffness replaces ``stiffness``), triangles and tetrahedra."""
+    if b.type == "solid":
+        return solid(*b.resolution, size=b.size, origin=b.position, density=b.density,
+                     pinned=b.pins if isinstance(b.pins, list) else [])
+    top = _spring_topology(b)
+    if b.energies is not None and _term(b, "spring") is None:
+        top = Topology(top.positions, top.masses, np.zeros((0, 2), np.int32), np.zeros(0), np.zeros(0),
+                       np.zeros(0), np.zeros(0, np.int8), top.pinned, top.triangles, top.tets)
+    return top
+
+
+def element_specs(b, top) -> list:
+    """The energy terms of a config Body besides its springs, as ElementGroup arguments
+    (engine.forces.elements): the solid's material, then ``energies`` in order."""
+    out = []
+    if b.type == "solid":
+        m = b.material
+        out.append(dict(kind="elastic", nodes=top.tets, material=(m.model, *lame(m.young, m.poisson)),
+                        damping=b.damping, name=m.model))
+    nodes = {"bending": lambda: hinges(top.triangles), "area": lambda: top.triangles, "volume": lambda: top.tets}
+    for t in b.energies or []:
+        if t.type != "spring":
+            out.append(dict(kind=t.type, nodes=nodes[t.type](), stiffness=t.stiffness, name=t.type))
+    return out
+
+
+def _spring_topology(b):
+    spring = _term(b, "spring")
+    kw = dict(mass=b.mass, ks=b.stiffness if spring is None else spring.stiffness, kd=b.damping)
     if b.type == "chain":
         bend = {} if b.bend_stiffness is None else dict(bend_ks=b.bend_stiffness, bend_kd=b.damping)
         return chain(b.segments + 1, start=b.position, length=b.length, direction=b.direction,
@@ -70,12 +103,13 @@ class SoftBody(SystemBase):
                                    drag=forces.drag if forces is not None else 0.0,
                                    attractors=forces.attractors if forces is not None else (),
                                    vortices=forces.vortices if forces is not None else (),
-                                   self_collision=cfg.thickness if cfg.self_collision else 0.0)
+                                   self_collision=cfg.thickness if cfg.self_collision else 0.0,
+                                   elements=element_specs(cfg, self.topology))
         self.control = control
         self.pinned = np.array(self.topology.pinned, np.int64)
         self.pin_home = self.topology.positions[self.pinned].copy() if len(self.pinned) else None
         self.released = False
-        self.triangles = self.topology.triangles if cfg.type in ("cloth", "jelly") else np.zeros((0, 3), np.int32)
+        self.triangles = self.topology.triangles if cfg.type in ("cloth", "jelly", "solid") else np.zeros((0, 3), np.int32)
         self.lines = (self.system.lines((STRUCTURAL,)) if cfg.type in ("chain", "hair")
                       else np.zeros((0, 2), np.int32))
 
@@ -100,6 +134,13 @@ class SoftBody(SystemBase):
     @property
     def node_count(self) -> int:
         return self.topology.node_count
+
+    def add_energy(self, energy, nodes, params=None, name: str = "user") -> None:
+        """Attach a user energy (engine.forces.user.UserEnergy) over (E, k) ``nodes``."""
+        from .forces.user import UserEnergy
+
+        self.system.add_elements(UserEnergy(energy, nodes, self.node_count, params, dtype=self.system.dtype,
+                                            name=name))
 
     def contacts(self, names=(), shapes=()):
         """Node contacts since the last call (:class:`~engine.contacts.Contacts`; each row names

@@ -21,7 +21,7 @@ from .base import (ColorStop, Finite, Fraction01, Keyframe, Name, NonNeg, Positi
 from ..particles.capacity import MAX_POOL, pool_sizes
 from .rigid import Joint, Rigid, RigidBody, check_scene as _check_rigid
 
-BODY_INTEGRATORS = (*INTEGRATORS, "xpbd")  # soft bodies may also take XPBD (engine.springs.xpbd)
+BODY_INTEGRATORS = (*INTEGRATORS, "xpbd")  # soft bodies may also take XPBD (engine.xpbd)
 
 
 MAX_STOPS = 8
@@ -318,6 +318,29 @@ class Vortex(Strict):
                                if math.fsum(c * c for c in self.axis) < 1e-12 else None)])
 
 
+class EnergyTerm(Strict):
+    """One energy term of a soft body (engine.forces.terms): ``spring`` (the body's Hooke springs,
+    stiffness N/m replacing ``stiffness``), ``bending`` (dihedral, per hinge, N·m; cloth),
+    ``area`` (½K(A − A₀)²/A₀ per triangle, K in N/m; cloth), ``volume`` (½K(V − V₀)²/V₀ per
+    tetrahedron, K in Pa; jelly or solid)."""
+
+    type: Literal["spring", "bending", "area", "volume"]
+    stiffness: Annotated[float, Field(gt=0, le=1e12)]
+
+
+class Material(Strict):
+    """A solid's hyperelastic material: ``model``, Young's modulus ``young`` (Pa) and Poisson's
+    ratio ``poisson`` (−1 < ν < 0.5)."""
+
+    model: Literal["neo_hookean", "stvk", "corotated"] = "neo_hookean"
+    young: Annotated[float, Field(gt=0, le=1e12)] = 1e5
+    poisson: Annotated[float, Field(gt=-1, lt=0.5)] = 0.3
+
+
+_TERM_BODIES = {"spring": ("chain", "hair", "cloth", "jelly"), "bending": ("cloth",), "area": ("cloth",),
+                "volume": ("jelly", "solid")}
+
+
 class Body(Strict):
     """A soft body: a spring network built by a topology builder (engine/springs/topology.py).
 
@@ -326,10 +349,13 @@ class Body(Strict):
     ``radius``, ``cap_angle``) or a line (``position`` → ``line_end``). cloth: a
     ``resolution = [nx, ny]`` grid of ``size = [w, d]`` in ``plane`` "xz" (flat), "xy" or "zy" (hanging)
     from ``position``. jelly: a ``resolution = [nx, ny, nz]`` lattice of ``size = [x, y, z]``.
-    Stiffness in N/m, damping in N·s/m, mass per node in kg."""
+    Stiffness in N/m, damping in N·s/m, mass per node in kg. solid: a box of ``size`` with
+    ``resolution = [nx, ny, nz]`` nodes cut into tetrahedra, ``density`` (kg/m³), ``material``;
+    its ``damping`` is a Kelvin–Voigt viscosity (Pa·s). ``energies``: the body's energy terms (none
+    given: its springs, as always; given: exactly those terms, ``spring`` among them or not)."""
 
     name: Name = ""
-    type: Literal["chain", "hair", "cloth", "jelly"]
+    type: Literal["chain", "hair", "cloth", "jelly", "solid"]
     position: Vec3 = [0.0, 1.0, 0.0]
     direction: Vec3 = [0.0, -1.0, 0.0]
     length: Annotated[float, Field(gt=0, le=100)] = 1.0
@@ -357,11 +383,15 @@ class Body(Strict):
     color: Annotated[List[Annotated[float, Field(ge=0, le=10)]], Field(min_length=3, max_length=3)] = [0.55, 0.6, 0.7]
     contacts: bool = False  # record node–collider contacts (the game API's contacts(body=name))
     self_collision: bool = False  # nodes no spring joins keep 2 × thickness apart (the shared grid)
+    energies: Optional[Annotated[List[EnergyTerm], Field(max_length=8)]] = None
+    density: Annotated[float, Field(gt=0, le=1e5)] = 1000.0  # kg/m³ (solid)
+    material: Material = Material()  # solid
 
     @model_validator(mode="after")
     def _check(self):
-        dims = 3 if self.type == "jelly" else 2
-        grid = self.type in ("cloth", "jelly")
+        dims = 3 if self.type in ("jelly", "solid") else 2
+        grid = self.type in ("cloth", "jelly", "solid")
+        wrong = [t.type for t in (self.energies or []) if self.type not in _TERM_BODIES[t.type]]
         return _report(self, [
             ("resolution", f"{self.type} needs {dims} numbers, got {self.resolution}"
              if grid and len(self.resolution) != dims else None),
@@ -372,6 +402,12 @@ class Body(Strict):
             ("pin_path", _check_path(self.pin_path)),
             ("self_collision", "needs thickness > 0 (nodes collide at 2 × thickness)"
              if self.self_collision and self.thickness <= 0 else None),
+            ("energies", f"{wrong[0]!r} does not apply to a {self.type} (it needs "
+             f"{' or '.join(_TERM_BODIES[wrong[0]])})" if wrong else None),
+            ("material", f"applies to a solid only, not a {self.type}"
+             if "material" in self.model_fields_set and self.type != "solid" else None),
+            ("density", f"applies to a solid only (a {self.type} takes mass per node)"
+             if "density" in self.model_fields_set and self.type != "solid" else None),
         ])
 
 

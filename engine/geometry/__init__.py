@@ -5,8 +5,5 @@ estimate (:mod:`.sizing`, what the config checks before anything is allocated).
 
 Imports no physics room (particles, springs, rigid): the shape table (:mod:`engine.colliders`),
 the interacting particles and the rigid bodies build on it."""
-from .shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, inertia, quat_from_rotvec, quat_mul, quat_normalize,
-                     quat_rotvec, quat_to_matrix, closest_point, signed_distance)
 
-__all__ = ["BOX", "CAPSULE", "KINDS", "PLANE", "SPHERE", "inertia", "quat_from_rotvec", "quat_mul",
-           "quat_normalize", "quat_rotvec", "quat_to_matrix", "closest_point", "signed_distance"]
+# No re-exports: the config imports .sizing (no Taichi) and must not load .shapes (Taichi) with it.

@@ -16,22 +16,31 @@ and drag toward the wind when the scene has drag: ``fields.external``, added to 
 import taichi as ti
 
 from ..forces.fields import PointForces
+from ..forces.terms import hooke_energy, hooke_force
 
 ACCUMULATORS = ("gather", "atomic")
 
 
 @ti.func
 def spring_force(model: ti.template(), X: ti.template(), V: ti.template(), s):
-    """The force on end a of spring s (end b receives its negative)."""
+    """The force on end a of spring s (end b receives its negative): the Hooke term's
+    (engine.forces.terms.hooke_force)."""
     a, b = model.spring_a[s], model.spring_b[s]
-    L = X[a] - X[b]
-    ln = L.norm()
-    f = ti.Vector.zero(model.dtype, 3)
-    if ln > 1e-12:
-        n = L / ln
-        f = -(model.spring_ks[s] * (ln - model.spring_rest_length[s])
-              + model.spring_kd[s] * (V[a] - V[b]).dot(n)) * n
-    return f
+    return hooke_force(model.dtype, X[a], X[b], V[a], V[b], model.spring_ks[s], model.spring_kd[s],
+                       model.spring_rest_length[s])
+
+
+@ti.kernel
+def spring_energy(model: ti.template(), X: ti.template()) -> ti.f64:
+    """Σ ½ ks C² over the springs (J), in f64, summed in spring order (serial: deterministic)."""
+    total = ti.cast(0, ti.f64)
+    ti.loop_config(serialize=True)
+    for s in range(model.spring_count):
+        a, b = model.spring_a[s], model.spring_b[s]
+        total += hooke_energy(ti.f64, ti.cast(X[a], ti.f64), ti.cast(X[b], ti.f64),
+                              ti.cast(model.spring_ks[s], ti.f64),
+                              ti.cast(model.spring_rest_length[s], ti.f64))
+    return total
 
 
 @ti.kernel

@@ -13,6 +13,7 @@ per-node parameters the model holds two precomputed orderings, both built once i
 import numpy as np
 import taichi as ti
 
+from ..xpbd.schedule import greedy_colors, schedule
 from .topology import Topology
 
 
@@ -30,15 +31,7 @@ def csr_adjacency(n_nodes: int, edges: np.ndarray):
 
 def edge_coloring(n_nodes: int, edges: np.ndarray):
     """Greedy colouring in spring order (deterministic). Returns (colour per spring, n_colours)."""
-    used = [0] * n_nodes  # bitmask of colours already at each node
-    colors = np.empty(len(edges), np.int32)
-    for s, (a, b) in enumerate(edges.tolist()):
-        busy = used[a] | used[b]
-        c = (~busy & (busy + 1)).bit_length() - 1  # lowest free colour
-        colors[s] = c
-        used[a] |= 1 << c
-        used[b] |= 1 << c
-    return colors, int(colors.max()) + 1 if len(colors) else 0
+    return greedy_colors(n_nodes, edges)
 
 
 @ti.data_oriented
@@ -94,10 +87,8 @@ class SpringModel:
         self.adj_spring.from_numpy(pad(spr, 2 * M, np.int32))
         self.adj_sign.from_numpy(pad(sign, 2 * M, npd))
         self.spring_colors, nc = colors, nc = edge_coloring(n, top.edges)
-        order = np.argsort(colors, kind="stable")
+        order, self.color_ranges = schedule(colors, nc)
         self.color_spring.from_numpy(pad(order, M, np.int32))
-        bounds = np.searchsorted(colors[order], np.arange(nc + 1))
-        self.color_ranges = [(int(bounds[c]), int(bounds[c + 1])) for c in range(nc)]
 
     def _write_inv_mass(self):
         inv = np.where(self.pinned_mask, 0.0, 1.0 / self.top.masses)

@@ -27,9 +27,11 @@ class StiffnessError(SimulationDiverged):
         self.method, self.h, self.t, self.kind = method, float(h), math.nan, "unstable_step"
 
 
-def network_bounds(top: Topology, pinned_mask: np.ndarray) -> dict:
+def network_bounds(top: Topology, pinned_mask: np.ndarray, extra=None) -> dict:
     """ω_max, c_max (rad/s, 1/s) over free nodes, the worst node's stiffest spring and mass, and
-    the range of kd/ks over springs."""
+    the range of kd/ks over springs. ``extra``: (k_i, c_i) per node from energy terms (Gershgorin
+    row sums of their Hessians, engine.forces.elements: a spring's would be 2 ks), added to the
+    springs' 2 Σ ks and 2 Σ kd; their damping ratios c_i/k_i join the kd/ks range."""
     n = top.node_count
     a, b = top.edges[:, 0], top.edges[:, 1]
     sum_k = np.bincount(a, top.ks, n) + np.bincount(b, top.ks, n)
@@ -39,15 +41,22 @@ def network_bounds(top: Topology, pinned_mask: np.ndarray) -> dict:
     np.maximum.at(max_k, b, top.ks)
     free = ~pinned_mask
     out = dict(omega=0.0, c=0.0, k=0.0, m=0.0, q_min=0.0, q_max=0.0)
-    if not free.any() or not len(top.edges):
+    if not free.any() or not (len(top.edges) or extra is not None):
         return out
-    w2 = np.where(free, 2 * sum_k / top.masses, 0.0)
+    row_k, row_c = 2 * sum_k, 2 * sum_c
+    if extra is not None:
+        row_k, row_c = row_k + extra[0], row_c + extra[1]
+        max_k = np.maximum(max_k, 0.5 * extra[0])
+    w2 = np.where(free, row_k / top.masses, 0.0)
     worst = int(np.argmax(w2))
-    out.update(omega=math.sqrt(w2[worst]), c=float(np.max(np.where(free, 2 * sum_c / top.masses, 0.0))),
+    out.update(omega=math.sqrt(w2[worst]), c=float(np.max(np.where(free, row_c / top.masses, 0.0))),
                k=float(max_k[worst]), m=float(top.masses[worst]))
     stiff = top.ks > 0
-    if stiff.any():
-        q = top.kd[stiff] / top.ks[stiff]
+    q = top.kd[stiff] / top.ks[stiff]
+    if extra is not None:
+        has = extra[0] > 0
+        q = np.concatenate([q, extra[1][has] / extra[0][has]])
+    if len(q):
         out.update(q_min=float(q.min()), q_max=float(q.max()))
     return out
 

@@ -28,14 +28,14 @@ from ..ode.staged import FieldStepper, StagedDoubling, copy_nodes
 from ..runtime import ensure_init
 from . import constraints
 from .energy import network_energy
-from .forces import ACCUMULATORS, accel_launcher
+from .forces import ACCUMULATORS, accel_launcher, spring_energy
 from .limits import DistanceLimits
 from .model import SpringModel, SpringState
 from .stability import SAFETY, StiffnessError, auto_substeps, check_step, network_bounds, stable_step
 from .topology import STRUCTURAL, Topology, surface_lines
-from .xpbd import XPBDStepper
+from ..xpbd import SpringConstraints, XPBDSolver
 
-INTEGRATORS = ODE_INTEGRATORS + (XPBDStepper.method,)
+INTEGRATORS = ODE_INTEGRATORS + (XPBDSolver.method,)
 __all__ = ["SpringSystem", "SimulationDiverged", "StiffnessError", "INTEGRATORS"]
 
 
@@ -46,7 +46,7 @@ class SpringSystem:
                  xpbd_iterations: int = 10, max_stretch=None, limit_iterations: int = 2,
                  check_stability: bool = True, dtype=ti.f32, record_energy: bool = False,
                  control: Control = None, name: str = "", contacts: int = 0, drag: float = 0.0, wind=None,
-                 attractors=(), vortices=(), self_collision: float = 0.0):
+                 attractors=(), vortices=(), self_collision: float = 0.0, elements=()):
         """``control``: the scene's inputs (gravity, wind, collider poses); without one the system
         has its own, with ``gravity``, ``wind`` (m/s) and the colliders' own paths. ``drag``: linear
         drag toward the wind, k in 1/s (a = −k (v − wind) on every free node; 0: not compiled,
@@ -55,7 +55,10 @@ class SpringSystem:
         ``contacts``: keep up to this many node–collider contact records between drains
         (:meth:`contacts`; 0: none, and no recording is compiled). ``self_collision``: a thickness
         > 0 keeps nodes that no spring joins 2 × that apart (engine.springs.self_collision, through
-        the shared neighbour grid); 0: none, nothing built."""
+        the shared neighbour grid); 0: none, nothing built. ``elements``: energy terms over
+        the nodes besides the springs — dicts of :class:`~engine.forces.elements.ElementGroup`'s
+        arguments (kind, nodes, stiffness, material, damping, name) or built groups (user energies,
+        engine.forces.user); none: nothing of them is built or compiled."""
         ensure_init()
         if integrator not in INTEGRATORS:
             raise ValueError(f"integrator: unknown value {integrator!r}; allowed: {', '.join(INTEGRATORS)}")
@@ -87,11 +90,9 @@ class SpringSystem:
         self.set_positions(topology.positions)
         self.set_velocities(np.zeros_like(topology.positions))
         n = topology.node_count
-        if integrator == "xpbd":
-            self.stepper = XPBDStepper(self.model, self.state, self.fields, xpbd_iterations)
-        else:
-            self.accel = accel_launcher(self.model, self.fields, accumulate)
-            self.stepper = FieldStepper(integrator, self.state.node_pos, self.state.node_vel, n, self.accel)
+        self.accumulate, self.xpbd_iterations = accumulate, xpbd_iterations
+        self.elements = [e if not isinstance(e, dict) else self._group(e) for e in elements]
+        self._make_stepper()
         self.order = self.stepper.order
         self.colliders = colliders
         self._contacts = constraints.NodeContacts(colliders)
@@ -109,10 +110,53 @@ class SpringSystem:
         self._limits = DistanceLimits(self.model, self.state) if max_stretch is not None else None
         self._doubling = StagedDoubling(self.stepper) if adaptive else None
         self.driver = Driver(self, StepPolicy(adaptive=adaptive, rtol=self.rtol, atol=self.atol))
-        self.bounds = network_bounds(topology, self.model.pinned_mask)
+        self.bounds = self._bounds()
         self.time = 0.0
         self._frame = (0.0, 1.0)  # (start, length) of the frame being stepped: pins move over it
         self.energy_log = []
+
+    def _make_stepper(self) -> None:
+        n = self.top.node_count
+        if self.integrator == "xpbd":
+            self.stepper = XPBDSolver(n, self.state.node_pos, self.state.node_vel, self.model.node_inv_mass,
+                                      self.fields, [SpringConstraints(self.model), *self.elements],
+                                      self.xpbd_iterations)
+        else:
+            self.accel = accel_launcher(self.model, self.fields, self.accumulate)
+            if self.elements:  # springs and gravity first (as without terms), then each term in order
+                springs, w = self.accel, self.model.node_inv_mass
+
+                def accel(X, V, A, j):
+                    springs(X, V, A, j)
+                    for g in self.elements:
+                        g.add_forces(X, V, w, A, j)
+
+                self.accel = accel
+            self.stepper = FieldStepper(self.integrator, self.state.node_pos, self.state.node_vel, n, self.accel)
+
+    def add_elements(self, group) -> None:
+        """Add an energy term after construction (a user energy, engine.forces.user): the stepper
+        is rebuilt around it (its fields and kernels kept), the guard's bounds refreshed."""
+        if group.n_nodes != self.top.node_count:
+            raise ValueError(f"elements: built for {group.n_nodes} nodes, the body has {self.top.node_count}")
+        self.elements.append(group)
+        self._make_stepper()
+        if self._doubling is not None:
+            self._doubling = StagedDoubling(self.stepper)
+        self.bounds = self._bounds()
+
+    def _group(self, spec: dict):
+        from ..forces.elements import ElementGroup
+
+        return ElementGroup(positions=self.top.positions, dtype=self.dtype, **spec)
+
+    def _bounds(self) -> dict:
+        extra = None
+        if self.elements:
+            n = self.top.node_count
+            extra = (sum((g.node_bounds()[0] for g in self.elements), np.zeros(n)),
+                     sum((g.node_bounds()[1] for g in self.elements), np.zeros(n)))
+        return network_bounds(self.top, self.model.pinned_mask, extra)
 
     # -- stepping ---------------------------------------------------------------------------------
     def stable_step(self) -> float:
@@ -121,7 +165,15 @@ class SpringSystem:
 
     def substeps_for(self, dt: float) -> int:
         if self.substeps == "auto":
-            return 1 if self.integrator == "xpbd" else auto_substeps(self.integrator, dt, self.bounds)
+            if self.integrator == "xpbd":
+                # springs: one step a frame (stable at any h). A material's C = √(2ψ) converges
+                # poorly in a few iterations at h = 1/30 (the jelly spread to 1.7× its width);
+                # substeps that resolve its stiffest mode, as the explicit step would, keep it
+                # (small steps beat iterations: Macklin et al. 2019, "Small steps in physics
+                # simulation")
+                solid = any(getattr(g, "kind", "") == "elastic" for g in self.elements)
+                return auto_substeps("symplectic_euler", dt, self.bounds) if solid else 1
+            return auto_substeps(self.integrator, dt, self.bounds)
         if isinstance(self.substeps, int):
             return self.substeps
         return max(1, math.ceil(dt / self.h - 1e-9)) if self.h else 1
@@ -259,7 +311,7 @@ class SpringSystem:
         self._pins_changed()
 
     def _pins_changed(self) -> None:
-        self.bounds = network_bounds(self.top, self.model.pinned_mask)
+        self.bounds = self._bounds()
         if self._limits is not None:
             self._limits.refresh()
 
@@ -281,8 +333,15 @@ class SpringSystem:
                 self.pin(r.node, r.target)
 
     def energy(self) -> dict:
+        spring = spring_energy(self.model, self.state.node_pos) if self.model.spring_count else 0.0
         e = network_energy(self.top, self.model.pinned_mask, self.positions(), self.velocities(),
-                           self.gravity[None].to_numpy())
+                           self.gravity[None].to_numpy(), spring)
+        for g in self.elements:  # every term by its name (the same term twice: name_2, …)
+            key, k = g.name, 2
+            while key in e:
+                key, k = f"{g.name}_{k}", k + 1
+            e[key] = g.energy(self.state.node_pos)
+            e["total"] += e[key]
         return dict(t=self.time, **e)
 
     def lines(self, kinds=(STRUCTURAL,)) -> np.ndarray:

@@ -28,6 +28,7 @@ class Topology:
     kind: np.ndarray  # (M,) int8, one of STRUCTURAL, SHEAR, BEND, BODY
     pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int32))
+    tets: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.int32))  # volume elements
 
     def __post_init__(self):
         self.positions = np.asarray(self.positions, np.float64).reshape(-1, 3)
@@ -40,6 +41,7 @@ class Topology:
         self.kind = np.broadcast_to(np.asarray(self.kind, np.int8), (m,)).copy()
         self.pinned = np.unique(np.asarray(self.pinned, np.int32).ravel())
         self.triangles = np.asarray(self.triangles, np.int32).reshape(-1, 3)
+        self.tets = np.asarray(self.tets, np.int32).reshape(-1, 4)
         if np.any(self.masses <= 0):
             raise ValueError("masses: every node needs a positive mass (pin a node to fix it)")
         if m and (self.edges.min() < 0 or self.edges.max() >= n or np.any(self.edges[:, 0] == self.edges[:, 1])):
@@ -207,6 +209,13 @@ def jelly(nx: int, ny: int, nz: int, size=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0
     shear_ks = ks if shear_ks is None else shear_ks
     body_ks = ks if body_ks is None else body_ks
     groups = [(pairs(axis), STRUCTURAL, ks, kd), (pairs(face), SHEAR, shear_ks, kd), (pairs(body), BODY, body_ks, kd)]
+    top = _build(pos, mass, groups, pinned, _box_surface(idx, pos))
+    top.tets = box_tets(nx, ny, nz, pos)  # for volume terms (engine.forces.elements)
+    return top
+
+
+def _box_surface(idx, pos):
+    """Outward triangles of the six sides of a node lattice ``idx`` (nz, ny, nx)."""
     tris = []
     for sl in [np.s_[0], np.s_[-1]]:  # the six sides as 2-D index grids, quads split in two
         for side in (idx[sl], idx[:, sl], idx[:, :, sl]):
@@ -216,7 +225,35 @@ def jelly(nx: int, ny: int, nz: int, size=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0
     p0, p1, p2 = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
     inward = np.einsum("ij,ij->i", np.cross(p1 - p0, p2 - p0), (p0 + p1 + p2) / 3 - centre) < 0
     tris[inward] = tris[inward][:, ::-1]
-    return _build(pos, mass, groups, pinned, tris)
+    return tris
+
+
+def solid(nx: int, ny: int, nz: int, size=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0),
+          density: float = 1000.0, pinned=()) -> Topology:
+    """An elastic box: an nx × ny × nz node lattice (node (k·ny + j)·nx + i) of ``size`` (m) from
+    ``origin`` cut into 6 tetrahedra per cell (:func:`box_tets`), no springs; each node carries a
+    quarter of the mass ρV of every tet it belongs to (lumped mass, kg; ``density`` in kg/m³).
+    Triangles: the outer faces."""
+    if min(nx, ny, nz) < 2:
+        raise ValueError(f"resolution: a solid needs at least 2 nodes per axis to make a tetrahedron, got {[nx, ny, nz]}")
+    kk, jj, ii = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    frac = np.stack([ii / (nx - 1), jj / (ny - 1), kk / (nz - 1)], -1).reshape(-1, 3)
+    pos = np.asarray(origin, np.float64) + frac * np.asarray(size, np.float64)
+    tets = box_tets(nx, ny, nz, pos)
+    vol = tet_volumes(pos, tets)
+    mass = np.zeros(len(pos))
+    for s in range(4):
+        mass += np.bincount(tets[:, s], density * vol / 4.0, len(pos))
+    idx = np.arange(nx * ny * nz).reshape(nz, ny, nx)
+    return Topology(pos, mass, np.zeros((0, 2), np.int32), np.zeros(0), np.zeros(0), np.zeros(0),
+                    np.zeros(0, np.int8), pinned, _box_surface(idx, pos), tets)
+
+
+def tet_volumes(x, tets) -> np.ndarray:
+    """Signed volumes (m³) of tetrahedra (T, 4) over positions x (N, 3)."""
+    x = np.asarray(x, np.float64)
+    a = x[tets[:, 0]]
+    return np.einsum("ij,ij->i", x[tets[:, 1]] - a, np.cross(x[tets[:, 2]] - a, x[tets[:, 3]] - a)) / 6.0
 
 
 def merge(*tops: Topology) -> Topology:
@@ -229,9 +266,48 @@ def merge(*tops: Topology) -> Topology:
                     np.concatenate([t.edges + o for t, o in zip(tops, offs)]), cat("rest_length"),
                     cat("ks"), cat("kd"), cat("kind"),
                     np.concatenate([t.pinned + o for t, o in zip(tops, offs)]),
-                    np.concatenate([t.triangles + o for t, o in zip(tops, offs)]))
+                    np.concatenate([t.triangles + o for t, o in zip(tops, offs)]),
+                    np.concatenate([t.tets + o for t, o in zip(tops, offs)]))
 
 
 def surface_lines(top: Topology, kinds: Sequence[int] = (STRUCTURAL,)) -> np.ndarray:
     """(K, 2) node index pairs of the springs of the given kinds, for line rendering."""
     return top.edges[np.isin(top.kind, kinds)]
+
+
+def hinges(triangles: np.ndarray) -> np.ndarray:
+    """(H, 4) hinges (a, b, c, d) of a triangle mesh: every edge a–b shared by exactly two
+    triangles (a, b, c) and (b, a, d) of consistent orientation, in sorted-edge order."""
+    tris = np.asarray(triangles, np.int64).reshape(-1, 3)
+    found = {}
+    for t in tris.tolist():
+        for s in range(3):
+            a, b, c = t[s], t[(s + 1) % 3], t[(s + 2) % 3]
+            found.setdefault((min(a, b), max(a, b)), []).append((a, b, c))
+    out = []
+    for key in sorted(found):
+        side = found[key]
+        if len(side) == 2:
+            (a, b, c), (_, _, d) = side
+            out.append((a, b, c, d))
+    return np.asarray(out, np.int32).reshape(-1, 4)
+
+
+def box_tets(nx: int, ny: int, nz: int, positions: np.ndarray) -> np.ndarray:
+    """(6 (nx−1)(ny−1)(nz−1), 4) tetrahedra of a node lattice (node (k·ny + j)·nx + i): each cell
+    cut in six around its main diagonal (Kuhn's subdivision: neighbouring cells share their face
+    diagonals, so the mesh is conforming), every tet oriented to positive volume."""
+    if min(nx, ny, nz) < 2:
+        raise ValueError(f"resolution: needs at least 2 nodes per axis to make a tetrahedron, got {[nx, ny, nz]}")
+    kk, jj, ii = np.meshgrid(np.arange(nz - 1), np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
+    base = ((kk * ny + jj) * nx + ii).ravel()
+    corner = lambda di, dj, dk: base + (dk * ny + dj) * nx + di  # noqa: E731
+    v000, v111 = corner(0, 0, 0), corner(1, 1, 1)
+    tets = []
+    for p, q in (((1, 0, 0), (1, 1, 0)), ((1, 0, 0), (1, 0, 1)), ((0, 1, 0), (1, 1, 0)),
+                 ((0, 1, 0), (0, 1, 1)), ((0, 0, 1), (1, 0, 1)), ((0, 0, 1), (0, 1, 1))):
+        tets.append(np.stack([v000, corner(*p), corner(*q), v111], 1))
+    tets = np.concatenate(tets).astype(np.int32)
+    flip = tet_volumes(positions, tets) < 0
+    tets[flip] = tets[flip][:, [0, 2, 1, 3]]
+    return tets

@@ -35,7 +35,10 @@ PIXEL_BYTES, TEXEL_BYTES, MESH_PIXEL_BYTES = 56, 36, 44
 NODE_BYTES, SPRING_BYTES = 256, 64
 # Springs per node at most: chain and hair (structural + bend), cloth (structural, shear, bend
 # in both directions), jelly (structural 3, face and body diagonals 10, bend 3).
-SPRINGS_PER_NODE = {"chain": 2, "hair": 2, "cloth": 6, "jelly": 16}
+# A solid: 6 tetrahedra per cell, so per node about 6 tets of ~110 B (nodes, rest volume, B, λ, four
+# force slots) plus its four CSR slots: 12 springs' worth. Energy terms on other bodies add at most
+# a few per node (hinges, triangles, tets): 4 more.
+SPRINGS_PER_NODE = {"chain": 2, "hair": 2, "cloth": 6, "jelly": 16, "solid": 12}
 
 DEFAULT_MAX_MEMORY = 4 << 30  # 4 GiB
 DEFAULT_MAX_STEPS = 2_000_000  # integrator steps (particle steps, or a body's substeps) per run
@@ -104,7 +107,7 @@ def estimate(cfg, width: int, height: int, frames_in_flight: int, body_substeps=
     parts["particles"] = slots * per_slot
     parts["sprites"] = slots * SPRITE_BYTES
     nodes = [body_nodes(b) for b in cfg.bodies]
-    parts["bodies"] = sum(n * (NODE_BYTES + SPRINGS_PER_NODE[b.type] * SPRING_BYTES)
+    parts["bodies"] = sum(n * (NODE_BYTES + (SPRINGS_PER_NODE[b.type] + (4 if b.energies else 0)) * SPRING_BYTES)
                           for n, b in zip(nodes, cfg.bodies))
     pixels = width * height
     scale = 1.0

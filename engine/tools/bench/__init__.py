@@ -11,7 +11,8 @@ another), ``api`` (the game API's level restart, memory over build/discard cycle
 new render size, the cost of its argument checks), ``interact`` (the neighbour grid and a
 granular sweep per 100k particles against numba, and the sand, water and galaxy configs at
 1280×720), ``rigid`` (1,000 boxes into piles on the XPBD
-path, 10,000 free bodies with RK4 on the ODE path). ``quick`` uses small sizes so CI can run it in
+path, 10,000 free bodies with RK4 on the ODE path), ``energy`` (a neo-Hookean solid's forces by the
+closed form against autodiff on the same tetrahedra, and configs/jelly_solid.toml per frame). ``quick`` uses small sizes so CI can run it in
 seconds.
 """
 from __future__ import annotations
@@ -23,10 +24,10 @@ import time
 from .common import Row, format_table
 
 SECTIONS = ("step", "frame", "effects", "ode", "startup", "features", "cloth", "output", "wedge",
-            "api", "interact", "rigid")
+            "api", "interact", "rigid", "energy")
 _MODULES = {"step": "step", "frame": "frame", "effects": "effects", "ode": "ode_vs_scipy",
             "startup": "startup", "features": "features", "cloth": "cloth", "output": "output",
-            "wedge": "wedge", "api": "api", "interact": "interact", "rigid": "rigid"}
+            "wedge": "wedge", "api": "api", "interact": "interact", "rigid": "rigid", "energy": "energy"}
 
 
 def run(quick: bool = False, only=None, echo=None, quiet: bool = True):
