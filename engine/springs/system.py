@@ -24,8 +24,8 @@ from ..control import ColliderInput, Control
 from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
 from ..ode.staged import FieldStepper, StagedDoubling, copy_nodes
-from ..runtime import ensure_init
-from . import constraints
+from ..runtime import _arch_in_use, ensure_init
+from . import constraints, fused
 from .energy import network_energy
 from .forces import ACCUMULATORS, accel_launcher, spring_energy
 from .limits import DistanceLimits
@@ -165,7 +165,8 @@ class SpringSystem:
         """Advance by dt seconds (a frame of any length), landing exactly on time + dt."""
         if not dt > 0:
             raise ValueError(f"dt: must be positive, got {dt}")
-        if self.model.node_count:
+        fuse = self._fusable()
+        if self.model.node_count and not fuse:  # (the fused run does it in its launch)
             constraints.begin_frame(self.model, self.state)
         if not self.adaptive:
             n = self.substeps_for(dt)
@@ -209,7 +210,44 @@ class SpringSystem:
         constraints.finalize(self.model, self.state, self._contacts, x0, v0, self._bad,
                              self._alpha(t_end), t_end, h, self.contact_log)
 
+    def _fusable(self) -> bool:
+        """Whether a frame's substeps run in one launch (engine.springs.fused): nothing needs the
+        host between them and the network is small enough for one CPU thread."""
+        if self.adaptive or self._limits is not None or self.elements or not self.model.spring_count:
+            return False
+        if self.model.node_count > fused.MAX_NODES or _arch_in_use() != "cpu":
+            return False
+        if self._contacts.on and self.control.colliders_move:
+            return False  # the colliders move between substeps: the host places them
+        if self.integrator == "xpbd":
+            return True
+        return self.accumulate == "gather" and hasattr(self.stepper, "_segments")
+
+    def _fused_steps(self, t0: float, h: float, j: int, n: int) -> int:
+        """Steps j … n−1 of the frame in one launch; the same times as :meth:`fixed_step`'s."""
+        times = np.empty((n - j, 2), np.float64)
+        for m in range(j, n):
+            t_end = t0 + m * h + h
+            times[m - j] = self._alpha(t_end), t_end
+        x0, v0 = self.state.node_pos, self.state.node_vel
+        if self._contacts.on:
+            x0, v0 = self._x0, self._v0
+        st = self.stepper
+        if self.integrator == "xpbd":
+            spr = st.groups[0] if st.groups else None
+            lam = spr.lam if spr is not None else st.x_prev
+            its = st.iterations if spr is not None else 0
+            args = (True, st.x_prev, lam, its, (), st.x_prev)
+        else:
+            segs = tuple((slot, kick, tuple(drifts)) for slot, kick, drifts in st._segments)
+            args = (False, x0, x0, 0, segs, st.a)
+        fused.run_steps(self.model, self.state, self.gravity, self._contacts, x0, v0, self._bad,
+                        self.contact_log, times, h, int(j == 0), *args)
+        return n - j
+
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
+        if self._fusable():
+            return self._fused_steps(t0, h, j, n)
         t = t0 + j * h
         self._drive_pins(h, t + h)
         x0, v0 = self.state.node_pos, self.state.node_vel

@@ -21,18 +21,24 @@ never exploding. Joints, rigid contacts and particle constraints join as further
 import taichi as ti
 
 
+@ti.func
+def predict_node(X: ti.template(), V: ti.template(), w: ti.template(), x_prev: ti.template(), hh, g, i):
+    """v += h g (free node i); x_prev = x; x += h v."""
+    v = V[i]
+    if w[i] > 0:
+        v += hh * g
+    V[i] = v
+    x_prev[i] = X[i]
+    X[i] += hh * v
+
+
 @ti.kernel
 def _predict(n: ti.i32, X: ti.template(), V: ti.template(), w: ti.template(), gravity: ti.template(),
              x_prev: ti.template(), h: ti.f64):
     hh = ti.cast(h, X.dtype)
     g = ti.cast(gravity[None], X.dtype)
     for i in range(n):
-        v = V[i]
-        if w[i] > 0:
-            v += hh * g
-        V[i] = v
-        x_prev[i] = X[i]
-        X[i] += hh * v
+        predict_node(X, V, w, x_prev, hh, g, i)
 
 
 @ti.kernel
