@@ -176,6 +176,7 @@ def test_bad_input_is_one_line_naming_the_key(body, key):
     assert key in msg and len([ln for ln in msg.splitlines() if ln.strip()]) <= 2, msg
 
 
+@pytest.mark.slow
 def test_scene_without_energy_terms_compiles_nothing_new():
     """A spring cloth steps without any element-group kernel being compiled (counted before and
     after: other tests in the process may have compiled them for their own groups)."""

@@ -6,7 +6,9 @@
   wall time) for projectile_drag, damped_spring, lotka-volterra and kepler;
 * ``stability.csv/.png`` — largest stable h against spring stiffness, measured and predicted;
 * ``energy_drift.csv/.png`` — relative energy error over a long fixed-step run;
-* ``bounce.csv/.png`` — the dropped ball's error with impacts located in time and projected.
+* ``bounce.csv/.png`` — the dropped ball's error with impacts located in time and projected;
+* ``soft_energy_drift.csv/.png`` — the same for a neo-Hookean solid and a bending cloth (issue 24):
+  Euler against symplectic Euler and Verlet at one h.
 
 Needs the ``chart`` extra (matplotlib, scipy): ``pip install -e ".[chart]"``.
 """
@@ -15,7 +17,7 @@ import os
 import sys
 from typing import Iterable, List, Optional, Union
 
-CHARTS = ("workprec", "stability", "energy", "scenes", "bounce")
+CHARTS = ("workprec", "stability", "energy", "scenes", "bounce", "soft_energy")
 # NUMERICS.md's work–precision figures, drawn over the matching charts as × markers
 _NUMERICS_REFS = {
     "lotka-volterra": [
@@ -131,6 +133,13 @@ def _jobs(names, out_dir, quick):
     for name in CASES:
         if "workprec" in names or name in names:
             jobs.append((f"work-precision {name}", workprec_job(name)))
+    if "soft_energy" in names:
+        def soft_energy_job():
+            from .soft_energy import H, TITLES, soft_energy_drift
+
+            return _chart(out_dir, "soft_energy_drift", soft_energy_drift(quick=quick), None,
+                          lambda png, rows: plot.energy_png(png, rows, H, TITLES))
+        jobs.append(("soft-body energy drift", soft_energy_job))
     if "scenes" in names:
         from .scenes import cloth_rows, sparks_rows
 
