@@ -41,10 +41,13 @@ MAX_NODES = 4096
 @ti.kernel
 def run_steps(model: ti.template(), state: ti.template(), gravity: ti.template(), contacts: ti.template(),
               x0: ti.template(), v0: ti.template(), bad_t: ti.template(), log: ti.template(),
-              times: ti.types.ndarray(), h: ti.f64, begin: ti.i32, xpbd: ti.template(),
-              x_prev: ti.template(), lam: ti.template(), iterations: ti.i32,
-              segments: ti.template(), A: ti.template()):
-    """``times``: (k, 2) f64, (α, t_end) of each of the k substeps of h to run. ``begin``: 1 at a
+              times: ti.types.ndarray(), h: ti.f64, begin: ti.i32, moves: ti.types.ndarray(),
+              n_moves: ti.i32, xpbd: ti.template(), x_prev: ti.template(), lam: ti.template(),
+              iterations: ti.i32, segments: ti.template(), A: ti.template()) -> ti.f64:
+    """``moves``: (≥ n_moves, 4) f64 rows (node, x, y, z): pin targets set since the last step
+    (a pin path's per-frame move), written here instead of one field write per component.
+    Returns the divergence flag (bad_t) after the run, so the driver needs no read-back launch.
+    ``times``: (k, 2) f64, (α, t_end) of each of the k substeps of h to run. ``begin``: 1 at a
     frame's first substep (pinned nodes' pin_start = where they are, as ``begin_frame``).
     ``xpbd``: an XPBD step (``x_prev``, ``lam``, ``iterations``) or else the splitting scheme's
     ``segments`` ((slot, kick, drifts), as FieldStepper) over the stepper's accelerations ``A``."""
@@ -52,6 +55,11 @@ def run_steps(model: ti.template(), state: ti.template(), gravity: ti.template()
     n = ti.static(model.node_count)
     g = ti.cast(gravity[None], model.dtype)
     hh = ti.cast(h, model.dtype)
+    ti.loop_config(serialize=True)
+    for m in range(n_moves):
+        node = ti.cast(moves[m, 0], ti.i32)
+        for c in ti.static(range(3)):
+            model.pin_target[node][c] = ti.cast(moves[m, 1 + c], model.dtype)
     ti.loop_config(serialize=True)
     for k in range(times.shape[0]):
         alpha, t_end = times[k, 0], times[k, 1]
@@ -88,3 +96,4 @@ def run_steps(model: ti.template(), state: ti.template(), gravity: ti.template()
                     X[i] = xi
         for i in range(n):
             finalize_node(model, state, contacts, x0, v0, bad_t, alpha, t_end, h, log, i)
+    return bad_t[None]

@@ -97,6 +97,14 @@ class SpringSystem:
         self.time = 0.0
         self._frame = (0.0, 1.0)  # (start, length) of the frame being stepped: pins move over it
         self.energy_log = []
+        # pin targets set on moving pins, written at the next step (engine.springs.fused takes
+        # them into its launch); the fused run's bad_t, so first_nonfinite needs no read-back
+        self._moves, self._bad_seen = {}, None
+
+    def _flush_moves(self) -> None:
+        for node, pos in self._moves.items():
+            self.model.pin_target[node] = pos
+        self._moves = {}
 
     def _make_stepper(self) -> None:
         n = self.top.node_count
@@ -166,6 +174,8 @@ class SpringSystem:
         if not dt > 0:
             raise ValueError(f"dt: must be positive, got {dt}")
         fuse = self._fusable()
+        if not fuse:
+            self._flush_moves()
         if self.model.node_count and not fuse:  # (the fused run does it in its launch)
             constraints.begin_frame(self.model, self.state)
         if not self.adaptive:
@@ -241,8 +251,13 @@ class SpringSystem:
         else:
             segs = tuple((slot, kick, tuple(drifts)) for slot, kick, drifts in st._segments)
             args = (False, x0, x0, 0, segs, st.a)
-        fused.run_steps(self.model, self.state, self.gravity, self._contacts, x0, v0, self._bad,
-                        self.contact_log, times, h, int(j == 0), *args)
+        moves = np.zeros((max(1, len(self._moves)), 4), np.float64)
+        for r, (node, pos) in enumerate(self._moves.items()):
+            moves[r] = node, *pos
+        self._bad_seen = fused.run_steps(self.model, self.state, self.gravity, self._contacts, x0, v0,
+                                         self._bad, self.contact_log, times, h, int(j == 0), moves,
+                                         len(self._moves), *args)
+        self._moves = {}
         return n - j
 
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
@@ -259,7 +274,8 @@ class SpringSystem:
         return 1
 
     def first_nonfinite(self):
-        t = float(self._bad[None])
+        t = float(self._bad[None]) if self._bad_seen is None else self._bad_seen
+        self._bad_seen = None
         if t >= constraints.NO_FAILURE:
             return None
         self._bad[None] = constraints.NO_FAILURE
@@ -318,9 +334,11 @@ class SpringSystem:
         self.contact_log.count[None] = 0
         self.driver.reset()
         self.time, self._frame, self.energy_log = 0.0, (0.0, 1.0), []
+        self._moves, self._bad_seen = {}, None
 
     def pin(self, node: int, target=None) -> None:
         """Hold ``node`` at ``target`` (default: where it is now)."""
+        self._moves.pop(node, None)
         pos = self.state.node_pos[node] if target is None else [float(c) for c in target]
         self.model.pin_start[node] = self.state.node_pos[node]
         self.model.pin_target[node] = pos
@@ -328,6 +346,7 @@ class SpringSystem:
         self._pins_changed()
 
     def release(self, node: int) -> None:
+        self._moves.pop(node, None)
         self.model.set_pinned(node, False)
         self._pins_changed()
 
@@ -341,7 +360,7 @@ class SpringSystem:
         over the frame, its velocity inferred. Pins the node if it was free."""
         if not self.model.pinned_mask[node]:
             self.pin(node)
-        self.model.pin_target[node] = [float(c) for c in pos]
+        self._moves[node] = [float(c) for c in pos]  # written at the next step (_flush_moves)
 
     def apply(self, requests) -> None:
         """Pin requests from the control (:class:`~engine.control.PinRequest`), in order."""
