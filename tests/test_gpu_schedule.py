@@ -76,8 +76,13 @@ def k(n: int):
     assert serial_parts("def k(n: int):\n    for i in range(n):\n        x = 1\n") == []
 
 
-# kernels allowed to be serial, by qualified name, with why (none of them runs in a frame)
-ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE state stepped in time"}
+# kernels allowed to be serial, by qualified name, with why: none runs in a frame on a GPU
+ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE state stepped in time",
+           "run_steps": "engine.springs.fused: a small spring network's frame on the CPU backend only "
+                        "(SpringSystem._fusable checks the arch; a GPU keeps the parallel per-phase "
+                        "launches): one thread beats 4-16 launches a substep there"}
+# of those, the ones a frame may launch on the CPU (the slow check below records on the CPU)
+CPU_FRAME = {"run_steps"}
 
 
 def kernels_in_source(root):
@@ -117,5 +122,6 @@ def test_no_kernel_in_the_core_is_serialised():
 def test_no_kernel_launched_per_frame_is_serialised(path):
     seen = launched_per_frame(path)
     assert seen, "no kernels recorded"
-    bad = {name: why for name, fn in seen.items() if (why := serial_parts(inspect.getsource(fn)))}
+    bad = {name: why for name, fn in seen.items()
+           if (why := serial_parts(inspect.getsource(fn))) and name not in CPU_FRAME}
     assert bad == {}, bad
