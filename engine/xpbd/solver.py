@@ -15,6 +15,9 @@ A *constraint group* (springs: :class:`~engine.xpbd.constraints.SpringConstraint
 ``project(X, x_prev, w, h)`` — one launch that sweeps all its colours in order (each colour a
 top-level loop of the kernel: Taichi runs a kernel's top-level loops one after the other, so the
 sweep is the same Gauss–Seidel order as one launch per colour, at one launch's cost).
+On the CPU backend a spring-only network of up to 4096 nodes skips this loop: its whole frame,
+every substep and colour, is one serial launch (engine.springs.fused, the same bytes; the
+per-node and per-spring bodies — :func:`predict_node`, ``project_spring`` — are shared).
 Unconditionally stable for any h: too few iterations leave stiff constraints softer (sagging),
 never exploding. Joints, rigid contacts and particle constraints join as further groups.
 """
