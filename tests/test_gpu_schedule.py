@@ -83,7 +83,12 @@ ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE st
            # rigid bodies are few and their f64 state lives on the CPU
            "_build.<locals>.joints": "rigid XPBD joints, Gauss-Seidel",
            "_build.<locals>.contacts": "rigid XPBD contacts, Gauss-Seidel",
-           "_build.<locals>.velocities": "rigid XPBD velocity pass, Gauss-Seidel"}
+           "_build.<locals>.velocities": "rigid XPBD velocity pass, Gauss-Seidel",
+           "run_steps": "engine.springs.fused: a small spring network's frame on the CPU backend only "
+                        "(SpringSystem._fusable checks the arch; a GPU keeps the parallel per-phase "
+                        "launches): one thread beats 4-16 launches a substep there"}
+# of those, the ones a frame may launch on the CPU (the slow check below records on the CPU)
+CPU_FRAME = {"run_steps"}
 
 
 def kernels_in_source(root):

@@ -29,12 +29,18 @@ def pin_at(model: ti.template(), i, alpha):
     return model.pin_start[i] + alpha * (model.pin_target[i] - model.pin_start[i])
 
 
+@ti.func
+def drive_node(model: ti.template(), state: ti.template(), alpha, h, i):
+    """Pinned node i gets the velocity that carries it to its target at the step's end."""
+    X, V = ti.static(state.node_pos, state.node_vel)
+    if model.node_pinned[i]:
+        V[i] = (pin_at(model, i, ti.cast(alpha, model.dtype)) - X[i]) / ti.cast(h, model.dtype)
+
+
 @ti.kernel
 def pin_drive(model: ti.template(), state: ti.template(), alpha: ti.f64, h: ti.f64):
-    X, V = ti.static(state.node_pos, state.node_vel)
     for i in range(model.node_count):
-        if model.node_pinned[i]:
-            V[i] = (pin_at(model, i, ti.cast(alpha, model.dtype)) - X[i]) / ti.cast(h, model.dtype)
+        drive_node(model, state, alpha, h, i)
 
 
 def ballistic(dtype):
@@ -65,6 +71,40 @@ class NodeContacts:
             self.locate = located_step(ballistic(self.dtype), colliders, 12, self.dtype, quadratic=True)
 
 
+@ti.func
+def finalize_node(model: ti.template(), state: ti.template(), contacts: ti.template(), x0: ti.template(),
+                  v0: ti.template(), bad_t: ti.template(), alpha, t_end, h, log: ti.template(), i):
+    """:func:`finalize` of node i (alpha, t_end, h: f64)."""
+    X, V = ti.static(state.node_pos, state.node_vel)
+    x, v = X[i], V[i]
+    if model.node_pinned[i]:
+        x = pin_at(model, i, ti.cast(alpha, model.dtype))
+    else:
+        if ti.static(contacts.on):
+            dt = contacts.dtype
+            hh = ti.cast(h, dt)
+            xs, vs, xa, va = ti.cast(x, dt), ti.cast(v, dt), ti.cast(x0[i], dt), ti.cast(v0[i], dt)
+            acc = 2.0 * (hh * vs - (xs - xa)) / (hh * hh)
+            u = vs - hh * acc
+            y0 = ti.Vector([xa[0], xa[1], xa[2], acc[0], acc[1], acc[2], u[0], u[1], u[2], 0.0, 0.0, 0.0], dt=dt)
+            y, _err, count, which, lag, xh, nh, speed, _dv, _stop = contacts.locate(
+                y0, ti.cast(t_end - h, dt), hh, i, 1.0, 1.0, 0.0)
+            if count > 0:  # an impact located on the path: the node as the events left it
+                xs, vs = ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[6], y[7], y[8]])
+            else:  # none: contacts held on the node's own end state (not the path's velocity)
+                xs, vs, hits, _killed, which, nh, speed = contacts.colliders.project(xs, vs, xa, va, hh)
+                xh, lag = xs, 0.0
+            if which >= 0:
+                x = ti.cast(xs, model.dtype)
+                v = ti.cast(vs, model.dtype)
+                if ti.static(log.enabled):
+                    log.record(i, which, xh, ti.cast(nh, ti.f32), ti.cast(speed, ti.f32), t_end - lag, 0)
+    if not is_finite(x.sum() + v.sum()):
+        ti.atomic_min(bad_t[None], t_end)
+    X[i] = x
+    V[i] = v
+
+
 @ti.kernel
 def finalize(model: ti.template(), state: ti.template(), contacts: ti.template(), x0: ti.template(),
              v0: ti.template(), bad_t: ti.template(), alpha: ti.f64, t_end: ti.f64, h: ti.f64,
@@ -73,35 +113,8 @@ def finalize(model: ti.template(), state: ti.template(), contacts: ti.template()
     that started from (``x0``, ``v0``). ``log``: an :class:`engine.contacts.ContactBuffer`
     (recording compiled in only when it is enabled): the step's fastest impact of each node, at
     its located time and position (a held contact's at the step's end)."""
-    X, V = ti.static(state.node_pos, state.node_vel)
     for i in range(model.node_count):
-        x, v = X[i], V[i]
-        if model.node_pinned[i]:
-            x = pin_at(model, i, ti.cast(alpha, model.dtype))
-        else:
-            if ti.static(contacts.on):
-                dt = contacts.dtype
-                hh = ti.cast(h, dt)
-                xs, vs, xa, va = ti.cast(x, dt), ti.cast(v, dt), ti.cast(x0[i], dt), ti.cast(v0[i], dt)
-                acc = 2.0 * (hh * vs - (xs - xa)) / (hh * hh)
-                u = vs - hh * acc
-                y0 = ti.Vector([xa[0], xa[1], xa[2], acc[0], acc[1], acc[2], u[0], u[1], u[2], 0.0, 0.0, 0.0], dt=dt)
-                y, _err, count, which, lag, xh, nh, speed, _dv, _stop = contacts.locate(
-                    y0, ti.cast(t_end - h, dt), hh, i, 1.0, 1.0, 0.0)
-                if count > 0:  # an impact located on the path: the node as the events left it
-                    xs, vs = ti.Vector([y[0], y[1], y[2]]), ti.Vector([y[6], y[7], y[8]])
-                else:  # none: contacts held on the node's own end state (not the path's velocity)
-                    xs, vs, hits, _killed, which, nh, speed = contacts.colliders.project(xs, vs, xa, va, hh)
-                    xh, lag = xs, 0.0
-                if which >= 0:
-                    x = ti.cast(xs, model.dtype)
-                    v = ti.cast(vs, model.dtype)
-                    if ti.static(log.enabled):
-                        log.record(i, which, xh, ti.cast(nh, ti.f32), ti.cast(speed, ti.f32), t_end - lag, 0)
-        if not is_finite(x.sum() + v.sum()):
-            ti.atomic_min(bad_t[None], t_end)
-        X[i] = x
-        V[i] = v
+        finalize_node(model, state, contacts, x0, v0, bad_t, alpha, t_end, h, log, i)
 
 
 @ti.kernel

@@ -43,20 +43,27 @@ def spring_energy(model: ti.template(), X: ti.template()) -> ti.f64:
     return total
 
 
+@ti.func
+def gather_node(model: ti.template(), fields: ti.template(), g, X: ti.template(), V: ti.template(), i):
+    """Node i's acceleration: its CSR row's spring forces in row order, times w, plus the point-mass
+    fields (gravity g, drag toward the wind, attractors, vortices: engine.forces.fields)."""
+    off, adj, sign = ti.static(model.adj_offset, model.adj_spring, model.adj_sign)
+    f = ti.Vector.zero(model.dtype, 3)
+    for e in range(off[i], off[i + 1]):
+        f += sign[e] * spring_force(model, X, V, adj[e])
+    w = model.node_inv_mass[i]
+    acc = w * f
+    if w > 0:
+        acc += fields.external(g, X[i], V[i])
+    return acc
+
+
 @ti.kernel
 def accel_gather(model: ti.template(), fields: ti.template(), X: ti.template(), V: ti.template(),
                  A: ti.template(), j: ti.i32):
     g = ti.cast(fields.gravity[None], model.dtype)
-    off, adj, sign = ti.static(model.adj_offset, model.adj_spring, model.adj_sign)
     for i in range(model.node_count):
-        f = ti.Vector.zero(model.dtype, 3)
-        for e in range(off[i], off[i + 1]):
-            f += sign[e] * spring_force(model, X, V, adj[e])
-        w = model.node_inv_mass[i]
-        acc = w * f
-        if w > 0:
-            acc += fields.external(g, X[i], V[i])
-        A[j, i] = acc
+        A[j, i] = gather_node(model, fields, g, X, V, i)
 
 
 @ti.kernel

@@ -25,8 +25,8 @@ from ..forces.fields import PointForces
 from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
 from ..ode.staged import FieldStepper, StagedDoubling, copy_nodes
-from ..runtime import ensure_init
-from . import constraints
+from ..runtime import _arch_in_use, ensure_init
+from . import constraints, fused
 from .energy import network_energy
 from .forces import ACCUMULATORS, accel_launcher, spring_energy
 from .limits import DistanceLimits
@@ -114,6 +114,14 @@ class SpringSystem:
         self.time = 0.0
         self._frame = (0.0, 1.0)  # (start, length) of the frame being stepped: pins move over it
         self.energy_log = []
+        # pin targets set on moving pins, written at the next step (engine.springs.fused takes
+        # them into its launch); the fused run's bad_t, so first_nonfinite needs no read-back
+        self._moves, self._bad_seen = {}, None
+
+    def _flush_moves(self) -> None:
+        for node, pos in self._moves.items():
+            self.model.pin_target[node] = pos
+        self._moves = {}
 
     def _make_stepper(self) -> None:
         n = self.top.node_count
@@ -182,7 +190,10 @@ class SpringSystem:
         """Advance by dt seconds (a frame of any length), landing exactly on time + dt."""
         if not dt > 0:
             raise ValueError(f"dt: must be positive, got {dt}")
-        if self.model.node_count:
+        fuse = self._fusable()
+        if not fuse:
+            self._flush_moves()
+        if self.model.node_count and not fuse:  # (the fused run does it in its launch)
             constraints.begin_frame(self.model, self.state)
         if not self.adaptive:
             n = self.substeps_for(dt)
@@ -226,7 +237,50 @@ class SpringSystem:
         constraints.finalize(self.model, self.state, self._contacts, x0, v0, self._bad,
                              self._alpha(t_end), t_end, h, self.contact_log)
 
+    def _fusable(self) -> bool:
+        """Whether a frame's substeps run in one launch (engine.springs.fused): nothing needs the
+        host between them and the network is small enough for one CPU thread."""
+        if (self.adaptive or self._limits is not None or self.elements or self._self is not None
+                or not self.model.spring_count):  # (self-collision runs between steps, on the host's call)
+            return False
+        if self.model.node_count > fused.MAX_NODES or _arch_in_use() != "cpu":
+            return False
+        if self._contacts.on and self.control.colliders_move:
+            return False  # the colliders move between substeps: the host places them
+        if self.integrator == "xpbd":
+            return True
+        return self.accumulate == "gather" and hasattr(self.stepper, "_segments")
+
+    def _fused_steps(self, t0: float, h: float, j: int, n: int) -> int:
+        """Steps j … n−1 of the frame in one launch; the same times as :meth:`fixed_step`'s."""
+        times = np.empty((n - j, 2), np.float64)
+        for m in range(j, n):
+            t_end = t0 + m * h + h
+            times[m - j] = self._alpha(t_end), t_end
+        x0, v0 = self.state.node_pos, self.state.node_vel
+        if self._contacts.on:
+            x0, v0 = self._x0, self._v0
+        st = self.stepper
+        if self.integrator == "xpbd":
+            spr = st.groups[0] if st.groups else None
+            lam = spr.lam if spr is not None else st.x_prev
+            its = st.iterations if spr is not None else 0
+            args = (True, st.x_prev, lam, its, (), st.x_prev)
+        else:
+            segs = tuple((slot, kick, tuple(drifts)) for slot, kick, drifts in st._segments)
+            args = (False, x0, x0, 0, segs, st.a)
+        moves = np.zeros((max(1, len(self._moves)), 4), np.float64)
+        for r, (node, pos) in enumerate(self._moves.items()):
+            moves[r] = node, *pos
+        self._bad_seen = fused.run_steps(self.model, self.state, self.fields, self._contacts, x0, v0,
+                                         self._bad, self.contact_log, times, h, int(j == 0), moves,
+                                         len(self._moves), *args)
+        self._moves = {}
+        return n - j
+
     def fixed_step(self, t0: float, h: float, j: int, n: int) -> int:
+        if self._fusable():
+            return self._fused_steps(t0, h, j, n)
         t = t0 + j * h
         self._drive_pins(h, t + h)
         x0, v0 = self.state.node_pos, self.state.node_vel
@@ -238,7 +292,8 @@ class SpringSystem:
         return 1
 
     def first_nonfinite(self):
-        t = float(self._bad[None])
+        t = float(self._bad[None]) if self._bad_seen is None else self._bad_seen
+        self._bad_seen = None
         if t >= constraints.NO_FAILURE:
             return None
         self._bad[None] = constraints.NO_FAILURE
@@ -297,9 +352,11 @@ class SpringSystem:
         self.contact_log.count[None] = 0
         self.driver.reset()
         self.time, self._frame, self.energy_log = 0.0, (0.0, 1.0), []
+        self._moves, self._bad_seen = {}, None
 
     def pin(self, node: int, target=None) -> None:
         """Hold ``node`` at ``target`` (default: where it is now)."""
+        self._moves.pop(node, None)
         pos = self.state.node_pos[node] if target is None else [float(c) for c in target]
         self.model.pin_start[node] = self.state.node_pos[node]
         self.model.pin_target[node] = pos
@@ -307,6 +364,7 @@ class SpringSystem:
         self._pins_changed()
 
     def release(self, node: int) -> None:
+        self._moves.pop(node, None)
         self.model.set_pinned(node, False)
         self._pins_changed()
 
@@ -320,7 +378,7 @@ class SpringSystem:
         over the frame, its velocity inferred. Pins the node if it was free."""
         if not self.model.pinned_mask[node]:
             self.pin(node)
-        self.model.pin_target[node] = [float(c) for c in pos]
+        self._moves[node] = [float(c) for c in pos]  # written at the next step (_flush_moves)
 
     def apply(self, requests) -> None:
         """Pin requests from the control (:class:`~engine.control.PinRequest`), in order."""

@@ -15,10 +15,25 @@ A *constraint group* (springs: :class:`~engine.xpbd.constraints.SpringConstraint
 ``project(X, x_prev, w, h)`` — one launch that sweeps all its colours in order (each colour a
 top-level loop of the kernel: Taichi runs a kernel's top-level loops one after the other, so the
 sweep is the same Gauss–Seidel order as one launch per colour, at one launch's cost).
+On the CPU backend a spring-only network of up to 4096 nodes skips this loop: its whole frame,
+every substep and colour, is one serial launch (engine.springs.fused, the same bytes; the
+per-node and per-spring bodies — :func:`predict_node`, ``project_spring`` — are shared).
 Unconditionally stable for any h: too few iterations leave stiff constraints softer (sagging),
 never exploding. Joints, rigid contacts and particle constraints join as further groups.
 """
 import taichi as ti
+
+
+@ti.func
+def predict_node(X: ti.template(), V: ti.template(), w: ti.template(), x_prev: ti.template(), hh,
+                 fields: ti.template(), g, i):
+    """v += h a_ext (free node i: gravity g and the point-mass fields); x_prev = x; x += h v."""
+    v = V[i]
+    if w[i] > 0:
+        v += hh * fields.external(g, X[i], v)
+    V[i] = v
+    x_prev[i] = X[i]
+    X[i] += hh * v
 
 
 @ti.kernel
@@ -27,12 +42,7 @@ def _predict(n: ti.i32, X: ti.template(), V: ti.template(), w: ti.template(), fi
     hh = ti.cast(h, X.dtype)
     g = ti.cast(fields.gravity[None], X.dtype)
     for i in range(n):
-        v = V[i]
-        if w[i] > 0:
-            v += hh * fields.external(g, X[i], v)  # gravity (and drag toward the wind, attractors...)
-        V[i] = v
-        x_prev[i] = X[i]
-        X[i] += hh * v
+        predict_node(X, V, w, x_prev, hh, fields, g, i)
 
 
 @ti.kernel
