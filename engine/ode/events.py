@@ -27,6 +27,10 @@ x = q[0:3] moving at v = p[0:3]. Within one step from t to t + h:
    surface and reflects its velocity), and go back to 1 for the rest of the step, at most
    :data:`MAX_EVENTS` times (a bouncing ball's Zeno tail falls to the projection).
 
+A step that cannot meet any surface (``clear_of``: outside at its end and too short to reach one
+from its start, the tests of 2 before any root is looked for) is the plain step and pays only
+those tests (most particles, most steps).
+
 The error the driver sees for a located step is the largest scaled error of its pieces, and the
 distance the located point was off the surface (the dense output's error) beyond rounding, scaled
 the same way: a step whose impact the Hermite cannot place within the tolerance is rejected and
@@ -100,6 +104,30 @@ def point_velocity(n: int):
         return out
 
     return point, velocity, placed
+
+
+def clear_of(events, dtype):
+    """``clear(xa, va, xb, vb, span) -> 1 | 0``: 1 when the step from (xa, va) to (xb, vb) over
+    ``span`` cannot meet any surface of ``events``: for every contact, outside at the end and
+    either touching at the start (held, not located) or too short to reach it,
+    span·max(|va|, |vb|) ≤ g_a + g_b (the very tests :func:`located_step`'s crossing makes before
+    it looks further). Then the located step is the plain step: no crossing is looked for, and
+    the projection holds nothing."""
+    band = contact_band(dtype)
+    n_fn = events.count
+
+    @ti.func
+    def clear(xa, va, xb, vb, span):
+        ok = 1
+        reach2 = span * span * ti.max(va.norm_sqr(), vb.norm_sqr())
+        for k in ti.static(range(n_fn)):
+            ga, _gda, _Na = events.contact(k, xa, va, span)
+            gb, _gdb, _Nb = events.contact(k, xb, vb, 0.0)
+            if not (gb >= 0.0 and (ga <= band(xa) or reach2 <= (ga + gb) * (ga + gb))):
+                ok = 0
+        return ok
+
+    return clear
 
 
 def located_step(step, events, n: int, dtype, quadratic: bool = False):
@@ -199,11 +227,28 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
             tau = root(k, xa, va, xb, vb, span, lo, glo, gdlo, hi, ghi, N, tol_g)
         return tau
 
+    clear = clear_of(events, dtype)
+
     @ti.func
     def run(y, t, h, i, atol, rtol, tol_g):
-        # One call site of ``step`` (it is inlined: the forces' code once, not three times): each
-        # pass steps one piece, either to t + h (then looks for a crossing in it) or to the
-        # event found in the previous pass (then responds and goes on with the rest).
+        """The step, and only when it could meet a surface (:func:`clear`) the located one: a
+        point far from every collider pays the plain step and a bound test."""
+        zero = ti.Vector.zero(dtype, 3)
+        yq, eq = step(y, t, h, i, atol, rtol)
+        out_y, out_err, out_count, out_k, out_lag = yq, ti.max(ti.cast(0.0, dtype), eq), 0, -1, ti.cast(0.0, dtype)
+        out_x, out_n, out_speed, out_dv, out_stop = zero, zero, ti.cast(0.0, dtype), ti.cast(0.0, dtype), 0
+        if clear(point(y), velocity(y), point(yq), velocity(yq), h) == 0:
+            out_y, out_err, out_count, out_k, out_lag, out_x, out_n, out_speed, out_dv, out_stop = located(
+                y, t, h, i, atol, rtol, tol_g, yq, eq)
+        return out_y, out_err, out_count, out_k, out_lag, out_x, out_n, out_speed, out_dv, out_stop
+
+    @ti.func
+    def located(y, t, h, i, atol, rtol, tol_g, y1, e1):
+        # Two call sites of ``step`` in all (it is inlined: the forces' code twice, not once per
+        # piece): run()'s whole step, handed in as (y1, e1) for the first pass, and this loop's for
+        # the pieces after an event. Each pass steps one piece, either to t + h (then looks for a
+        # crossing in it) or to the event found in the previous pass (then responds and goes on
+        # with the rest).
         zero = ti.Vector.zero(dtype, 3)
         s, length = ti.cast(0.0, dtype), ti.cast(h, dtype)
         ya, yb, err = y, y, ti.cast(0.0, dtype)
@@ -211,8 +256,14 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
         rec_k, rec_lag, rec_x, rec_n = -1, ti.cast(0.0, dtype), zero, zero
         rec_speed, rec_dv = ti.cast(-1.0, dtype), ti.cast(0.0, dtype)
         stopped, count, going, exhausted = 0, 0, 1, 0
+        pieces = 0
         while going != 0:
-            yb, e = step(ya, t + s, length, i, atol, rtol)
+            e = ti.cast(0.0, dtype)
+            if pieces == 0:  # the whole step, taken already by run()
+                yb, e = y1, e1
+            else:
+                yb, e = step(ya, t + s, length, i, atol, rtol)
+            pieces += 1
             err = ti.max(err, e)
             if first >= 0:  # advanced to the event: respond, then the rest of the step
                 count += 1

@@ -364,10 +364,21 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                         fy = v - j0
                         ra = ti.min(ti.max(j0, 0), Hl - 1) * W
                         rb = ti.min(ti.max(j0 + 1, 0), Hl - 1) * W
-                        for x in range(px0, px1 + 1):
-                            low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
-                            out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
-                                                    mode)
+                        if px1 - px0 == TILE - 1:
+                            # a whole row of the tile: all loads and table lookups first, then the
+                            # 16 stores (a store through an ndarray makes every later load re-read
+                            # its array's address: none come between them here)
+                            vals = ti.Vector([0] * TILE, dt=ti.u32)
+                            for dx in ti.static(range(TILE)):
+                                low = (1.0 - fy) * rows[ra + px0 + dx] + fy * rows[rb + px0 + dx]
+                                vals[dx] = finish(bgc[y * W + px0 + dx], low, EMPTY_LAYER, exposure, mode)
+                            for dx in ti.static(range(TILE)):
+                                out[y * W + px0 + dx] = vals[dx]
+                        else:
+                            for x in range(px0, px1 + 1):
+                                low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
+                                out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
+                                                        mode)
                 else:
                     for y in range(py0, py1 + 1):
                         for x in range(px0, px1 + 1):

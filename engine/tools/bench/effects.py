@@ -54,6 +54,20 @@ def time_frames(scene, w, h, frames, warm_seconds, warm_frames=5):
     return med(both) * 1e3, med(steps) * 1e3, med(draws) * 1e3
 
 
+def splat_cost(scene, w, h):
+    """(covered pairs, splat ms, plain-loop ms) of the scene's last frame (None: no sprites or
+    not the CPU's tile schedule): ``splatcost``."""
+    from . import splatcost
+
+    inner = scene.scene
+    R = getattr(inner, "renderer", None)
+    if R is None or not getattr(R, "has_particles", False) or R.schedule != "tiles" or not R.last_pairs:
+        return None
+    t = R.targets(w, h)
+    dep = t.fdep if R.mesh is not None else t.depth
+    return splatcost.measure(R, t, dep)
+
+
 def empty_frame_ms(w, h, frames):
     from ...api import ParticleScene
 
@@ -89,6 +103,13 @@ def run(quick: bool = False, configs=None):
         rows.append(Row(sec, name, fps, "frames/s",
                         f"{total:6.2f} ms = step {step:5.2f} + render {draw:6.2f}; live {live:,}; "
                         f"build {build:.1f} s", {"ms": total, "step_ms": step, "render_ms": draw}))
+        cost = splat_cost(scene, w, h)
+        if cost is not None:
+            n, t_splat, t_ref = cost
+            rows.append(Row(sec, f"  splat, {name}", t_splat / max(n, 1) * 1e6, "ns/pair",
+                            f"{n:,} covered pixel-sprite pairs, {t_splat:.2f} ms; plain loop over "
+                            f"them {t_ref / max(n, 1) * 1e6:.2f} ns/pair: x{t_splat / max(t_ref, 1e-9):.1f} "
+                            f"(target <= 3)", {"pairs": n, "splat_ms": t_splat, "ref_ms": t_ref}))
         worst = fps if worst is None else min(worst, fps)
         del scene
     if worst is not None:
