@@ -72,11 +72,14 @@ class ParticleSystem(SystemBase):
         """Rigid bodies' shapes published on the board move the sphere colliders named after
         them (a moving collider from its pose at the coupling step's start to its end: particles
         bounce off a rolling ball, its velocity inferred). Other shapes: the shape table's work."""
+        index = self._rigid_colliders
+        if not index:
+            return
         for _pub, shapes in coupling.get("rigid_shapes"):
-            for sh in shapes:
-                k = self._rigid_colliders.get(sh["name"])
+            for i, name in enumerate(shapes["names"]):
+                k = index.get(name)
                 if k is not None:
-                    self.control.move_collider(k, coupling.t0, coupling.t1, sh["position"])
+                    self.control.move_collider(k, coupling.t0, coupling.t1, shapes["position"][i])
 
     @property
     def _rigid_colliders(self) -> dict:

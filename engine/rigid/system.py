@@ -121,19 +121,19 @@ class RigidSystem(SystemBase):
 
     def publish(self, coupling) -> None:
         """The bodies' shapes at the step's end, for particles and soft bodies (sphere, box and
-        capsule poses with their velocities)."""
+        capsule poses with their velocities): :meth:`shapes`."""
         coupling.put(self.name, "rigid_shapes", self.shapes())
 
-    def shapes(self) -> list:
+    def shapes(self) -> dict:
+        """Every body's shape and pose now, as arrays in body order: ``names``, ``shape`` (codes
+        of engine.rigid.shapes), ``position``, ``orientation``, ``velocity``,
+        ``angular_velocity``, ``radius``, ``half_extents``, ``half_length``, ``restitution``,
+        ``friction`` (copies: the board outlives the step)."""
         S, m = self.state, self.model
-        out = []
-        for i in range(m.count):
-            out.append(dict(name=m.names[i], shape=int(m.body_shape[i]), position=S.x[i].copy(),
-                            orientation=S.q[i].copy(), velocity=S.v[i].copy(), angular_velocity=S.w[i].copy(),
-                            radius=float(m.body_radius[i]), half_extents=m.body_half[i].copy(),
-                            half_length=float(m.body_half_length[i]),
-                            restitution=float(m.body_restitution[i]), friction=float(m.body_friction[i])))
-        return out
+        return dict(names=m.names, shape=m.body_shape, position=S.x.copy(), orientation=S.q.copy(),
+                    velocity=S.v.copy(), angular_velocity=S.w.copy(), radius=m.body_radius,
+                    half_extents=m.body_half, half_length=m.body_half_length,
+                    restitution=m.body_restitution, friction=m.body_friction)
 
     # -- stepping --------------------------------------------------------------------------------
     def _static_shapes(self, t):
