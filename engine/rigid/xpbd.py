@@ -92,7 +92,7 @@ class XPBDSolver:
                 names = "jt ja jb jra jrb jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha".split()
                 for k, arr in zip(names, self.joints.arrays()[1:]):
                     getattr(F, k).from_numpy(arr)
-            F.substep(0.0, [0.0, 0.0, 0.0], 0.0, 0.0, 0, 0)  # compile now
+            F.substeps(0, 0.0, [0.0, 0.0, 0.0], 0.0, 0, 0)  # compile now
         return self.F
 
     def step(self, h: float, substeps: int, g, C: ContactSet, kinematic=None) -> None:
@@ -119,8 +119,7 @@ class XPBDSolver:
                 getattr(F, k).from_numpy(_pad(arr, F.capacity))
         g = np.asarray(g, np.float64)
         glen, hs = float(np.linalg.norm(g)), h / substeps
-        for s in range(substeps):
-            F.substep(hs, g.tolist(), glen, (s + 1.0) / substeps, nc, self.nj)
+        F.substeps(substeps, hs, g.tolist(), glen, nc, self.nj)
         n = m.count
         for k in "xqvw":
             getattr(S, k)[:] = getattr(F, k).to_numpy()[:n]

@@ -61,6 +61,38 @@ def _mujoco_pile(data, frames):
     return (time.perf_counter() - t0) / frames * 1e3
 
 
+def _shipped(quick: bool):
+    """Every shipped config with rigid bodies, stepped and rendered as `particles run` does
+    (1280×720; quick: 320×180), ms per frame over its first seconds."""
+    import glob
+    import os
+
+    from ...config import load_config
+    from ...config.load import read_toml
+    from ...scene import Scene
+
+    root = os.path.join(os.path.dirname(__file__), "..", "..", "..", "configs")
+    W, H = (320, 180) if quick else (1280, 720)
+    out = []
+    for path in sorted(glob.glob(os.path.join(root, "*.toml"))):
+        data = read_toml(path)
+        if not data.get("rigid_bodies"):
+            continue
+        s = Scene(load_config(data), width=W, height=H)
+        s.advance_frame()
+        s.render()
+        frames = 5 if quick else 60
+        t0 = time.perf_counter()
+        for _ in range(frames):
+            s.advance_frame()
+            s.render()
+        ms = (time.perf_counter() - t0) / frames * 1e3
+        name = os.path.basename(path)[:-5]
+        out.append(Row(SECTION, f"{name} (step + render {W}x{H})", ms, "ms/frame",
+                       f"{1e3 / ms:.0f} fps; target >= 60 fps"))
+    return out
+
+
 def _scene(data):
     from ...config import load_config
     from ...scene import Scene
@@ -87,6 +119,7 @@ def run(quick: bool = False):
     if mj is not None:
         rows.append(Row(SECTION, f"{n:,} boxes into piles (MuJoCo, 4 steps of 1/240 s)", mj, "ms/frame",
                         f"the same pile; engine / MuJoCo = {ms / mj:.2f}", extra=dict(ratio=ms / mj)))
+    rows += _shipped(quick)
     n = 1000 if quick else 10_000
     per = 10
     s = _scene(_free_config(n, per))
