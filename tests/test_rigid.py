@@ -53,10 +53,14 @@ def test_torque_free_angular_momentum_kept_to_rounding_on_the_ode_path():
     assert abs(E1 - E0) <= 1e-6 * E0  # RK4 at h = 1/240: the energy to the method's order
 
 
-def test_intermediate_axis_flip_period_matches_landau_lifshitz():
-    """ω₂ (the intermediate axis) changes sign every 2K(m)/λ (PHYSICS.md)."""
+@pytest.mark.parametrize("integrator, fps, tol", [
+    ("rk4", 240, 0.01),
+    pytest.param("xpbd", 60, 0.02, marks=pytest.mark.slow),  # measured 0.8 % (energy -2 % in 3.5 flips)
+])
+def test_intermediate_axis_flip_period_matches_landau_lifshitz(integrator, fps, tol):
+    """ω₂ (the intermediate axis) changes sign every 2K(m)/λ (PHYSICS.md), on both paths."""
     s = scene([dict(TUMBLER, angular_velocity=[0.05, 3.0, 0.05])], colliders=(), gravity=(0, 0, 0),
-              integrator="rk4", solver_h=1 / 480, fps=240)
+              integrator=integrator, solver_h=1 / 480, fps=fps)
     I = s.rigid.model.body_inertia[0]
     order = np.argsort(I)  # I1 < I2 < I3
     L, E = angular_momentum(s)
@@ -79,7 +83,7 @@ def test_intermediate_axis_flip_period_matches_landau_lifshitz():
     flips = [times[k] for k in range(1, len(signs)) if signs[k] != signs[k - 1]]
     assert len(flips) >= 2
     period = np.diff(flips).mean()
-    assert abs(period - expected) <= 0.01 * expected, (period, expected)
+    assert abs(period - expected) <= tol * expected, (period, expected)
 
 
 def test_box_slides_to_the_coulomb_stop_distance():

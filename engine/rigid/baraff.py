@@ -129,13 +129,13 @@ class BaraffSystem:
         for k, spec in planes:
             nrm = np.asarray(spec.normal, np.float64)
             nrm = nrm / np.linalg.norm(nrm)
-            found = collide.plane_contacts(m, y[:, 0:3], R, pos[k], nrm, np.zeros(m.count),
-                                           np.flatnonzero(m.dynamic))
+            idx, pas, pbs = collide.plane_contacts(m, y[:, 0:3], R, pos[k], nrm, np.zeros(m.count),
+                                                   np.flatnonzero(m.dynamic))
             deepest = {}
-            for i, pa, pb, n in found:  # one contact per body and plane: the deepest point
-                d = float(np.dot(pb - pa, n))
+            for i, pa, pb in zip(idx.tolist(), pas, pbs):  # one contact per body and plane: the deepest
+                d = float(np.dot(pb - pa, nrm))
                 if i not in deepest or d > deepest[i][0]:
-                    deepest[i] = (d, pa, n)
+                    deepest[i] = (d, pa, nrm)
             for i, (d, pa, n) in sorted(deepest.items()):
                 changed = True
                 y[i, 0:3] += d * n  # back onto the plane

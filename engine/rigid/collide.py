@@ -20,12 +20,6 @@ from .shapes import BOX, CAPSULE, SPHERE
 EPS = 1e-12
 
 
-def box_corners(x, R, h):
-    """(8, 3) world corners of a box."""
-    s = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], np.float64)
-    return x + (s * h) @ R.T
-
-
 def segment(x, R, l):
     """End points of a capsule's segment (local y)."""
     ax = R[:, 1] * l
@@ -186,25 +180,39 @@ def pair(sa, sb, xa, Ra, xb, Rb, ga, gb, margin):
     return spheres(ca, ra, cb, rb, margin)
 
 
+CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], np.float64)
+
+
 def plane_contacts(model, x, R, P, N, margins, bodies):
-    """Contacts of ``bodies`` (indices) with the plane through P with unit normal N (b = −1).
-    Vectorised per shape kind."""
-    out = []
-    for i in bodies:
-        k = model.body_shape[i]
-        if k == BOX:
-            pts = box_corners(x[i], R[i], model.body_half[i])
-            r = np.zeros(8)
-        elif k == SPHERE:
-            pts, r = x[i][None], np.array([model.body_radius[i]])
-        else:
-            pts = np.array(segment(x[i], R[i], model.body_half_length[i]))
-            r = np.full(2, model.body_radius[i])
-        s = (pts - P) @ N - r
-        for j in np.flatnonzero(s < margins[i]):
-            pa = pts[j] - r[j] * N
-            out.append((i, pa, pa - s[j] * N, N))
-    return out
+    """Contacts of ``bodies`` (indices) with the plane through P with unit normal N (b = −1), all
+    at once: a box's corners, a sphere's centre, a capsule's two end centres (less their radius).
+    Returns arrays (body, p_a, p_b), ordered by body, then point."""
+    bodies = np.asarray(bodies, np.int64)
+    kind = model.body_shape[bodies]
+    blocks = []
+    box = bodies[kind == BOX]
+    if len(box):
+        pts = x[box][:, None] + np.einsum("kcm,kvm->kvc", R[box], CORNERS[None] * model.body_half[box][:, None])
+        blocks.append((np.repeat(box, 8), pts.reshape(-1, 3), np.zeros(8 * len(box))))
+    sph = bodies[kind == SPHERE]
+    if len(sph):
+        blocks.append((sph, x[sph], model.body_radius[sph]))
+    cap = bodies[kind == CAPSULE]
+    if len(cap):
+        ax = R[cap][:, :, 1] * model.body_half_length[cap][:, None]
+        ends = np.stack([x[cap] - ax, x[cap] + ax], 1).reshape(-1, 3)
+        blocks.append((np.repeat(cap, 2), ends, np.repeat(model.body_radius[cap], 2)))
+    if not blocks:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
+    idx = np.concatenate([b[0] for b in blocks])
+    pts = np.concatenate([b[1] for b in blocks])
+    r = np.concatenate([b[2] for b in blocks])
+    order = np.argsort(idx, kind="stable")
+    idx, pts, r = idx[order], pts[order], r[order]
+    s = (pts - P) @ N - r
+    hit = s < margins[idx]
+    pa = pts[hit] - r[hit][:, None] * N
+    return idx[hit], pa, pa - s[hit][:, None] * N
 
 
 def sphere_collider_contacts(model, x, R, C, Rc, margins, bodies):
@@ -270,11 +278,12 @@ def _clip_batch(poly, n, t, h):
 def box_box_batch(xa, Ra, ha, xb, Rb, hb, margin):
     """:func:`box_box` for K pairs at once (arrays with a leading K): separating axes in the
     closed form of Gottschalk et al. (OBBTree, 1996) on C = R_aᵀ R_b, the face case clipped for
-    all pairs together. Returns a list of K contact lists (the edge case per pair)."""
+    all pairs together. Returns arrays (pair index, p_a, p_b, n) ordered by pair, then by point
+    (the edge case per pair)."""
     K = len(xa)
-    out = [[] for _ in range(K)]
+    out = []  # (pair indices, p_a, p_b, n) blocks
     if K == 0:
-        return out
+        return _blocks(out)
     d = xb - xa
     C = np.einsum("kmi,kmj->kij", Ra, Rb)
     A = np.abs(C) + 1e-12
@@ -300,10 +309,11 @@ def box_box_batch(xa, Ra, ha, xb, Rb, hb, margin):
     apart = (face_best > margin) | (edge_best > margin)
     edge = ~apart & (edge_best > face_best + 1e-3 + 0.05 * np.abs(face_best))
     for k in np.flatnonzero(edge):  # few: per pair
-        out[k] = box_box(xa[k], Ra[k], ha[k], xb[k], Rb[k], hb[k], margin[k])
+        got = box_box(xa[k], Ra[k], ha[k], xb[k], Rb[k], hb[k], margin[k])
+        out += [(np.full(1, k), pa[None], pb[None], n[None]) for pa, pb, n in got]
     sel = np.flatnonzero(~apart & ~edge)
     if len(sel) == 0:
-        return out
+        return _blocks(out)
     fa = face_axis[sel]
     a_ref = fa < 3
     ax = fa % 3
@@ -336,9 +346,18 @@ def box_box_batch(xa, Ra, ha, xb, Rb, hb, margin):
     earlier = np.tril(np.ones((8, 8), bool), -1)[None] & valid[:, None, :]
     repeat = ((gap < 1e-9 * (1.0 + np.abs(poly).max(-1)[:, :, None])) & earlier).any(2)
     good = valid & ~repeat & (depth < margin[sel][:, None])
-    for row, k in enumerate(sel):
-        for v in np.flatnonzero(good[row]):
-            p = poly[row, v]
-            qq = p - depth[row, v] * u[row]
-            out[k].append((qq, p, -u[row]) if a_ref[row] else (p, qq, u[row]))
-    return out
+    row, v = np.nonzero(good)
+    p = poly[row, v]
+    q = p - depth[row, v][:, None] * u[row]
+    ref = a_ref[row][:, None]
+    out.append((sel[row], np.where(ref, q, p), np.where(ref, p, q), np.where(ref, -u[row], u[row])))
+    return _blocks(out)
+
+
+def _blocks(blocks):
+    """Concatenate (index, p_a, p_b, n) blocks, stably ordered by index."""
+    if not blocks:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+    idx = np.concatenate([b[0] for b in blocks])
+    order = np.argsort(idx, kind="stable")
+    return (idx[order],) + tuple(np.concatenate([b[k] for b in blocks])[order] for k in (1, 2, 3))

@@ -1,8 +1,8 @@
 """The XPBD substep as one Taichi kernel on float64 fields (Müller et al. 2020; see :mod:`.xpbd`).
 Contacts and joints are solved Gauss–Seidel in their fixed order by serial loops, so the result
 cannot depend on threads (no atomics at all); the per-body stages run in parallel (each body
-writes only its own row). Four launches per substep: fused into one kernel (or one per step)
-the same code took LLVM about a minute to compile, split it takes about a second."""
+writes only its own row). One launch per substep (two with joints): the serial joint loop in the
+same kernel, or the substep loop inside one kernel, took LLVM about a minute to compile."""
 
 import taichi as ti
 
@@ -61,8 +61,8 @@ class Fields:
     Bodies: ``x q v w`` and the substep's start ``xp qp``, ``inv_m inv_i`` (zero for bodies that do
     not move now), ``inertia``, ``moving``, ``kin`` with path positions ``kx0 kx1``. Contacts
     (``capacity`` rows): ``ca cb cn cra crb rnd_a rnd_b mu e lam vn0``. Joints: ``jt ja jb jra jrb
-    jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha``. ``substep(h, g, |g|, frac, nc, nj)``: one
-    substep, a single launch."""
+    jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha``. ``substeps(n, h, g, |g|, nc, nj)``: n
+    substeps, one launch each (two with joints) and one to begin."""
 
     def __init__(self, nb: int, capacity: int, nj: int):
         nb, nj = max(1, nb), max(1, nj)
@@ -85,7 +85,7 @@ class Fields:
             setattr(self, k, ti.field(f64, nj))
         for k in "jt ja jb jlim".split():
             setattr(self, k, ti.field(ti.i32, nj))
-        self.substep = _build(self)
+        self.substeps = _build(self)
 
 
 def _build(F):
@@ -125,7 +125,9 @@ def _build(F):
             solve_joint(j, h, x, q, inv_m, inv_i, *J)
 
     @ti.kernel
-    def contacts(nc: ti.i32):
+    def finish(h: f64, glen: f64, nc: ti.i32, g: vec3, h2: f64, frac2: f64, more: ti.i32):
+        """The rest of a substep (contacts, velocities, velocity pass) and, when ``more``, the
+        start of the next (one launch where there were three)."""
         # the position pass over the contacts, in order: depth, then static friction
         ti.loop_config(serialize=True)
         for k in range(nc):
@@ -157,9 +159,6 @@ def _build(F):
                         if dlt < mu[k] * lam[k]:
                             apply_pos(x, q, inv_m, inv_i, a, ra, dlt * t, 1.0)
                             apply_pos(x, q, inv_m, inv_i, b, rb, dlt * t, -1.0)
-
-    @ti.kernel
-    def velocities(h: f64, glen: f64, nc: ti.i32):
         # v = Δx/h, ω = 2 vec(Δq q⁻¹)/h
         for i in range(nb):
             if moving[i] != 0 or kin[i] != 0:
@@ -194,24 +193,43 @@ def _build(F):
                         p = dv / wd
                         apply_vel(v, w, q, inv_m, inv_i, a, ra, p, 1.0)
                         apply_vel(v, w, q, inv_m, inv_i, b, rb, p, -1.0)
+        # the next substep's start        # ṽ_n of every contact before the substep (restitution)
+        for k in range(nc * more):
+            a, b = ca[k], cb[k]
+            n = cn[k]
+            vn0[k] = rel_vel(v, w, a, b, arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)).dot(n)
+        # integrate: v += hg, x += hv, ω with the gyroscopic term, q += ½h[ω, 0]q
+        for i in range(nb * more):
+            xp[i] = x[i]
+            qp[i] = q[i]
+            if moving[i] != 0:
+                v[i] += h2 * g
+                x[i] += h2 * v[i]
+                wb = qrot_inv(q[i], w[i])
+                I = inertia[i]
+                wb += h2 * (-wb.cross(I * wb)) / I
+                w[i] = qrot(q[i], wb)
+                q[i] = add_rot(q[i], h2 * w[i])
+            elif kin[i] != 0:
+                x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac2
 
-    def substep(h, g, glen, frac, nc, nj):
-        """One substep; with h = 0 it only compiles every kernel (a build pays the compile, not
-        the frame where the first contact or joint appears)."""
-        if h == 0.0:
-            begin(1.0, g, frac, 0)
+    def substeps(n, h, g, glen, nc, nj):
+        """n substeps of h: a begin, then per substep the joints (if any) and one launch that
+        finishes it and begins the next. n = 0 only compiles every kernel (a build pays the
+        compile, not the frame where the first contact or joint appears)."""
+        if n == 0:
+            begin(1.0, g, 1.0, 0)
             joints(1.0, 0)
-            contacts(0)
-            velocities(1.0, glen, 0)
+            finish(1.0, glen, 0, g, 1.0, 1.0, 0)
             return
-        begin(h, g, frac, nc)
-        if nj:
-            joints(h, nj)
-        if nc:
-            contacts(nc)
-        velocities(h, glen, nc)
+        begin(h, g, 1.0 / n, nc)
+        for s in range(n):
+            if nj:
+                joints(h, nj)
+            more = int(s + 1 < n)
+            finish(h, glen, nc, g, h, (s + 2.0) / n, more)
 
-    return substep
+    return substeps
 
 
 @ti.func

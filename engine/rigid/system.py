@@ -123,26 +123,26 @@ class RigidSystem(SystemBase):
 
     def publish(self, coupling) -> None:
         """The bodies' shapes at the step's end, for particles and soft bodies (sphere, box and
-        capsule poses with their velocities)."""
+        capsule poses with their velocities): :meth:`shapes`; the bodies' own shapes in the one shape
+        table posed over the step."""
         shapes = self.shapes()
         coupling.put(self.name, "rigid_shapes", shapes)
-        for i, sh in enumerate(shapes):  # the bodies' shapes in the one shape table: their pose over the step
-            k = self.shape_index.get(i)
-            if k is not None:
-                # spheres sit in the table unrotated (their contact is the same at any orientation;
-                # ω × r friction from a spinning ball is left out: spinning code costs compile time)
-                self.control.set_collider_pose(k, coupling.t0, coupling.t1, sh["position"], None, sh["velocity"])
+        for i, k in self.shape_index.items():
+            # spheres sit in the table unrotated (their contact is the same at any orientation;
+            # ω × r friction from a spinning ball is left out: spinning code costs compile time)
+            self.control.set_collider_pose(k, coupling.t0, coupling.t1, shapes["position"][i], None,
+                                           shapes["velocity"][i])
 
-    def shapes(self) -> list:
+    def shapes(self) -> dict:
+        """Every body's shape and pose now, as arrays in body order: ``names``, ``shape`` (codes
+        of engine.rigid.shapes), ``position``, ``orientation``, ``velocity``,
+        ``angular_velocity``, ``radius``, ``half_extents``, ``half_length``, ``restitution``,
+        ``friction`` (copies: the board outlives the step)."""
         S, m = self.state, self.model
-        out = []
-        for i in range(m.count):
-            out.append(dict(name=m.names[i], shape=int(m.body_shape[i]), position=S.x[i].copy(),
-                            orientation=S.q[i].copy(), velocity=S.v[i].copy(), angular_velocity=S.w[i].copy(),
-                            radius=float(m.body_radius[i]), half_extents=m.body_half[i].copy(),
-                            half_length=float(m.body_half_length[i]),
-                            restitution=float(m.body_restitution[i]), friction=float(m.body_friction[i])))
-        return out
+        return dict(names=m.names, shape=m.body_shape, position=S.x.copy(), orientation=S.q.copy(),
+                    velocity=S.v.copy(), angular_velocity=S.w.copy(), radius=m.body_radius,
+                    half_extents=m.body_half, half_length=m.body_half_length,
+                    restitution=m.body_restitution, friction=m.body_friction)
 
     # -- stepping --------------------------------------------------------------------------------
     def _static_shapes(self, t):
@@ -151,71 +151,81 @@ class RigidSystem(SystemBase):
             yield k, s, pos[k]
 
     def find_contacts(self, t: float, h: float) -> ContactSet:
-        """The contacts for a step of h from t: against the scene's static shapes, then body
-        pairs from the broad phase, in a fixed order."""
+        """The contacts for a step of h from t, in a fixed order: against the scene's static
+        shapes (shape by shape, then body, then point; b = −1 − the shape's index), then body
+        pairs from the broad phase (pair by pair, then point)."""
         S, m = self.state, self.model
         awake = self.solver.awake if self.solver is not None else np.ones(m.count, bool)
         moving = m.dynamic & awake
         speed = np.linalg.norm(S.v, axis=1) + np.linalg.norm(S.w, axis=1) * m.body_bound
         margins = SLOP + h * speed
         R = quat.matrix(S.q)
-        rows, sources = [], []
+        blocks = []  # (a, b, p_a, p_b, n, friction of b, restitution of b)
         live = np.flatnonzero(moving)
         for k, spec, p in self._static_shapes(t):
             if spec.kind == "plane":
                 nrm = np.asarray(spec.normal, np.float64)
-                found = collide.plane_contacts(m, S.x, R, p, nrm / np.linalg.norm(nrm), margins, live)
+                nrm = nrm / np.linalg.norm(nrm)
+                a, pa, pb = collide.plane_contacts(m, S.x, R, p, nrm, margins, live)
+                n = np.broadcast_to(nrm, pa.shape)
             else:
-                found = collide.sphere_collider_contacts(m, S.x, R, p, float(spec.radius), margins, live)
-            for i, pa, pb, n in found:
-                rows.append((i, -1, pa, pb, n, float(spec.friction), float(spec.restitution)))
-                sources.append(spec.name or f"colliders[{k}]")
+                rows = collide.sphere_collider_contacts(m, S.x, R, p, float(spec.radius), margins, live)
+                a = np.array([r[0] for r in rows], np.int64)
+                pa, pb, n = (np.array([r[c] for r in rows], np.float64).reshape(-1, 3) for c in (1, 2, 3))
+            K = len(a)
+            blocks.append((a, np.full(K, -1 - k), pa, pb, n, np.full(K, float(spec.friction)),
+                           np.full(K, float(spec.restitution))))
         pairs = collide.broad_phase(S.x, m.body_bound, margins)
         if len(pairs):
             keep = moving[pairs[:, 0]] | moving[pairs[:, 1]]
             if self.joints is not None:
                 keep &= np.array([not self._jointed(i, j) for i, j in pairs], bool)
             pairs = pairs[keep]
-        boxes = (m.body_shape[pairs[:, 0]] == BOX) & (m.body_shape[pairs[:, 1]] == BOX) if len(pairs) else np.zeros(0, bool)
-        bb = pairs[boxes]
-        found = dict(zip(np.flatnonzero(boxes).tolist(), collide.box_box_batch(
-            S.x[bb[:, 0]], R[bb[:, 0]], m.body_half[bb[:, 0]], S.x[bb[:, 1]], R[bb[:, 1]], m.body_half[bb[:, 1]],
-            margins[bb[:, 0]] + margins[bb[:, 1]])))
-        for k, (i, j) in enumerate(pairs):
-            if k in found:
-                got = found[k]
-            else:
+        if len(pairs):
+            boxes = (m.body_shape[pairs[:, 0]] == BOX) & (m.body_shape[pairs[:, 1]] == BOX)
+            bb = pairs[boxes]
+            k, pa, pb, n = collide.box_box_batch(
+                S.x[bb[:, 0]], R[bb[:, 0]], m.body_half[bb[:, 0]], S.x[bb[:, 1]], R[bb[:, 1]], m.body_half[bb[:, 1]],
+                margins[bb[:, 0]] + margins[bb[:, 1]])
+            found = [(np.flatnonzero(boxes)[k], pa, pb, n)]
+            for q in np.flatnonzero(~boxes):  # other shape pairs: one at a time
+                i, j = pairs[q]
                 gi = (m.body_radius[i], m.body_half[i], m.body_half_length[i])
                 gj = (m.body_radius[j], m.body_half[j], m.body_half_length[j])
                 got = collide.pair(m.body_shape[i], m.body_shape[j], S.x[i], R[i], S.x[j], R[j], gi, gj,
                                    margins[i] + margins[j])
-            for pa, pb, n in got:
-                rows.append((i, j, pa, pb, n, float(m.body_friction[j]), float(m.body_restitution[j])))
-                sources.append(m.names[j])
-        self._wake(rows, moving)
-        return ContactSet(m, S, rows, sources)
+                found += [(np.full(1, q), ca[None], cb[None], cn[None]) for ca, cb, cn in got]
+            q, pa, pb, n = collide._blocks(found)
+            i, j = pairs[q, 0], pairs[q, 1]
+            blocks.append((i, j, pa, pb, n, m.body_friction[j], m.body_restitution[j]))
+        cols = [np.concatenate([b[c] for b in blocks]) if blocks else None for c in range(7)]
+        if not blocks:
+            cols = [np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
+                    np.zeros((0, 3)), np.zeros(0), np.zeros(0)]
+        self._wake(cols[0], cols[1])
+        return ContactSet(m, S, *cols, statics=[s.name or f"colliders[{k}]" for k, s in enumerate(self.specs)])
 
     def _jointed(self, i, j) -> bool:
         if not hasattr(self, "_joint_pairs"):
             self._joint_pairs = {(min(r["a"], r["b"]), max(r["a"], r["b"])) for r in self.joints.rows}
         return (int(i), int(j)) in self._joint_pairs
 
-    def _wake(self, rows, moving) -> None:
-        """An asleep body touched by a moving one faster than the sleep speed wakes up."""
-        if self.solver is None or not rows:
+    def _wake(self, a, b) -> None:
+        """An asleep body touched by a moving one faster than the sleep speed wakes up (contacts
+        a–b of the step)."""
+        if self.solver is None or not len(a):
             return
         aw, S, m = self.solver.awake, self.state, self.model
         if aw[m.dynamic].all():
             return
         speed = np.linalg.norm(S.v, axis=1) + np.linalg.norm(S.w, axis=1) * m.body_bound
         active = aw & m.dynamic & (speed > self.settings.sleep_speed)
-        for i, j, *_ in rows:
-            if j < 0:
-                continue
-            for p, q in ((i, j), (j, i)):
-                if not aw[p] and m.dynamic[p] and active[q]:
-                    aw[p] = True
-                    self._rest[p] = 0.0
+        body = b >= 0
+        a, b = a[body], b[body]
+        for p, q in ((a, b), (b, a)):
+            wake = p[~aw[p] & m.dynamic[p] & active[q]]
+            aw[wake] = True
+            self._rest[wake] = 0.0
 
     def _kinematic(self, t0, t1):
         """(positions at t0, at t1) of every body, path-following ones from their paths."""

@@ -25,23 +25,18 @@ from .shapes import SPHERE
 
 class ContactSet:
     """The contacts of one rigid step, fixed over its substeps, in a fixed order: ``a``, ``b``
-    (−1: the world), normal ``n`` (from b to a), anchors in the body frames (``ra``; ``rb``, a
+    (negative: the world; −1 − k for the scene's static shape k), normal ``n`` (from b to a), anchors in the body frames (``ra``; ``rb``, a
     world point when b = −1), ``round_a``/``round_b`` (a sphere's radius: its anchor is re-aimed
     along ∓n each substep, so a rolling ball keeps touching at its lowest point), ``mu``
     (average of the two), ``e`` (the larger), ``lam`` (the last substep's normal multipliers),
     ``vn0`` (pre-substep normal speed) and ``source`` (what b is: a body's or a collider's name)."""
 
-    def __init__(self, model, state, rows, sources):
-        K = len(rows)
+    def __init__(self, model, state, a, b, pa, pb, n, mu_b, e_b, statics=()):
+        K = len(a)
         self.count = K
-        a = np.array([r[0] for r in rows], np.int32)
-        b = np.array([r[1] for r in rows], np.int32)
-        pa = np.array([r[2] for r in rows], np.float64).reshape(K, 3)
-        pb = np.array([r[3] for r in rows], np.float64).reshape(K, 3)
-        self.n = np.array([r[4] for r in rows], np.float64).reshape(K, 3)
-        mu_b = np.array([r[5] for r in rows], np.float64)
-        e_b = np.array([r[6] for r in rows], np.float64)
-        self.a, self.b = a, b
+        self.a, self.b = np.asarray(a, np.int32), np.asarray(b, np.int32)
+        self.n = np.ascontiguousarray(n, np.float64).reshape(K, 3)
+        a, b = self.a, self.b
         has_b = b >= 0
         bb = np.where(has_b, b, 0)
         self.ra = quat.rotate_inv(state.q[a], pa - state.x[a])
@@ -52,8 +47,13 @@ class ContactSet:
         self.e = np.maximum(model.body_restitution[a], e_b)
         self.lam = np.zeros(K)
         self.vn0 = np.zeros(K)
-        self.source = sources
         self.depth = np.einsum("ij,ij->i", pb - pa, self.n)
+        self._names, self._statics = model.names, list(statics)
+
+    @property
+    def source(self) -> list:
+        """What each contact's b is: a body's name, or a static shape's (b = −1 − its index)."""
+        return [self._names[k] if k >= 0 else self._statics[-1 - k] for k in self.b.tolist()]
 
     def arrays(self):
         """What the kernel takes, in its order (at least one row: external arrays cannot be empty)."""
@@ -92,7 +92,7 @@ class XPBDSolver:
                 names = "jt ja jb jra jrb jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha".split()
                 for k, arr in zip(names, self.joints.arrays()[1:]):
                     getattr(F, k).from_numpy(arr)
-            F.substep(0.0, [0.0, 0.0, 0.0], 0.0, 0.0, 0, 0)  # compile now
+            F.substeps(0, 0.0, [0.0, 0.0, 0.0], 0.0, 0, 0)  # compile now
         return self.F
 
     def step(self, h: float, substeps: int, g, C: ContactSet, kinematic=None) -> None:
@@ -119,8 +119,7 @@ class XPBDSolver:
                 getattr(F, k).from_numpy(_pad(arr, F.capacity))
         g = np.asarray(g, np.float64)
         glen, hs = float(np.linalg.norm(g)), h / substeps
-        for s in range(substeps):
-            F.substep(hs, g.tolist(), glen, (s + 1.0) / substeps, nc, self.nj)
+        F.substeps(substeps, hs, g.tolist(), glen, nc, self.nj)
         n = m.count
         for k in "xqvw":
             getattr(S, k)[:] = getattr(F, k).to_numpy()[:n]

@@ -38,6 +38,61 @@ def _free_config(n: int, steps_per_frame: int) -> dict:
             "solver": {"h": 1.0 / 60.0 / steps_per_frame}}
 
 
+def _mujoco_pile(data, frames):
+    """ms per 60 Hz frame of the same pile in MuJoCo (the outside anchor), or None without it."""
+    try:
+        import mujoco
+    except ImportError:
+        return None
+    bodies = "".join(
+        f'<body pos="{b["position"][0]} {b["position"][2]} {b["position"][1]}" '
+        f'quat="{b["orientation"][0]} {b["orientation"][1]} {b["orientation"][3]} {b["orientation"][2]}">'
+        f'<freejoint/><geom type="box" size="0.1 0.1 0.1" density="1000" friction="0.5"/></body>'
+        for b in data["rigid_bodies"])  # MuJoCo's z is up: (x, y, z) -> (x, z, y)
+    xml = (f'<mujoco><option timestep="{1 / 240}"/><worldbody><geom type="plane" size="50 50 0.1" '
+           f'friction="0.5"/>{bodies}</worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(model)
+    for _ in range(4):
+        mujoco.mj_step(model, d)
+    t0 = time.perf_counter()
+    for _ in range(frames * 4):
+        mujoco.mj_step(model, d)
+    return (time.perf_counter() - t0) / frames * 1e3
+
+
+def _shipped(quick: bool):
+    """Every shipped config with rigid bodies, stepped and rendered as `particles run` does
+    (1280×720; quick: 320×180), ms per frame over its first seconds."""
+    import glob
+    import os
+
+    from ...config import load_config
+    from ...config.load import read_toml
+    from ...scene import Scene
+
+    root = os.path.join(os.path.dirname(__file__), "..", "..", "..", "configs")
+    W, H = (320, 180) if quick else (1280, 720)
+    out = []
+    for path in sorted(glob.glob(os.path.join(root, "*.toml"))):
+        data = read_toml(path)
+        if not data.get("rigid_bodies"):
+            continue
+        s = Scene(load_config(data), width=W, height=H)
+        s.advance_frame()
+        s.render()
+        frames = 5 if quick else 60
+        t0 = time.perf_counter()
+        for _ in range(frames):
+            s.advance_frame()
+            s.render()
+        ms = (time.perf_counter() - t0) / frames * 1e3
+        name = os.path.basename(path)[:-5]
+        out.append(Row(SECTION, f"{name} (step + render {W}x{H})", ms, "ms/frame",
+                       f"{1e3 / ms:.0f} fps; target >= 60 fps"))
+    return out
+
+
 def _scene(data):
     from ...config import load_config
     from ...scene import Scene
@@ -60,6 +115,11 @@ def run(quick: bool = False):
     rows.append(Row(SECTION, f"{n:,} boxes into piles (xpbd, 20 substeps)", ms, "ms/frame",
                     f"target <= 8 ms at 60 Hz; {contacts} contacts in the last step, {asleep} asleep "
                     f"after {frames + 1} frames", extra=dict(contacts=contacts, asleep=asleep)))
+    mj = _mujoco_pile(_pile_config(n), frames)
+    if mj is not None:
+        rows.append(Row(SECTION, f"{n:,} boxes into piles (MuJoCo, 4 steps of 1/240 s)", mj, "ms/frame",
+                        f"the same pile; engine / MuJoCo = {ms / mj:.2f}", extra=dict(ratio=ms / mj)))
+    rows += _shipped(quick)
     n = 1000 if quick else 10_000
     per = 10
     s = _scene(_free_config(n, per))
