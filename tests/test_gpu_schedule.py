@@ -82,8 +82,8 @@ ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE st
            # correction sees the ones before it: the deterministic alternative to float atomics);
            # rigid bodies are few and their f64 state lives on the CPU
            "_build.<locals>.joints": "rigid XPBD joints, Gauss-Seidel",
-           "_build.<locals>.contacts": "rigid XPBD contacts, Gauss-Seidel",
-           "_build.<locals>.velocities": "rigid XPBD velocity pass, Gauss-Seidel",
+           "_build.<locals>.finish": "rigid XPBD contacts and velocity pass, Gauss-Seidel",
+           "_build.<locals>.whole": "rigid XPBD: a small scene's whole step on one thread",
            "run_steps": "engine.springs.fused: a small spring network's frame on the CPU backend only "
                         "(SpringSystem._fusable checks the arch; a GPU keeps the parallel per-phase "
                         "launches): one thread beats 4-16 launches a substep there"}

@@ -55,6 +55,9 @@ def rot_between(q: ti.template(), qp):
     return s * vec3(d[1], d[2], d[3])
 
 
+WHOLE_MAX_BODIES = 64  # up to this many bodies (no joints) a step is one serial launch
+
+
 class Fields:
     """The float64 fields one rigid system steps (Taichi fields: a launch with NumPy arrays as
     arguments cost ~20 µs per array here, a launch of a kernel on fields ~20 µs in all).
@@ -213,6 +216,95 @@ def _build(F):
             elif kin[i] != 0:
                 x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac2
 
+    @ti.kernel
+    def whole(nsub: ti.i32, h: f64, g: vec3, glen: f64, nc: ti.i32):
+        """Every substep of a step without joints in one launch (one thread: the contacts are
+        serial anyway, and at a few dozen bodies a launch costs more than their integration)."""
+        ti.loop_config(serialize=True)
+        for s in range(nsub):
+            frac = (s + 1.0) / nsub
+            # ṽ_n of every contact before the substep (restitution)
+            for k in range(nc):
+                a, b = ca[k], cb[k]
+                n = cn[k]
+                vn0[k] = rel_vel(v, w, a, b, arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)).dot(n)
+            # integrate: v += hg, x += hv, ω with the gyroscopic term, q += ½h[ω, 0]q
+            for i in range(nb):
+                xp[i] = x[i]
+                qp[i] = q[i]
+                if moving[i] != 0:
+                    v[i] += h * g
+                    x[i] += h * v[i]
+                    wb = qrot_inv(q[i], w[i])
+                    I = inertia[i]
+                    wb += h * (-wb.cross(I * wb)) / I
+                    w[i] = qrot(q[i], wb)
+                    q[i] = add_rot(q[i], h * w[i])
+                elif kin[i] != 0:
+                    x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac
+            # the position pass over the contacts, in order: depth, then static friction
+            for k in range(nc):
+                a, b = ca[k], cb[k]
+                n = cn[k]
+                lam[k] = 0.0
+                ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
+                d = (point_b(x, crb, b, k, rb) - x[a] - ra).dot(n)
+                if d > 0.0:
+                    lam[k] = positional(x, q, inv_m, inv_i, a, b, ra, rb, d * n, 0.0)
+            # static friction once every depth is resolved (λ_n final): undo the contact points'
+            # tangential slip over the substep where it takes less than μ λ_n
+            for k in range(nc):
+                if lam[k] > 0.0:
+                    a, b = ca[k], cb[k]
+                    n = cn[k]
+                    ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
+                    dp = x[a] + ra - xp[a] - qrot(qp[a], qrot_inv(q[a], ra))
+                    if b >= 0:
+                        dp -= x[b] + rb - xp[b] - qrot(qp[b], qrot_inv(q[b], rb))
+                    dpt = dp - dp.dot(n) * n
+                    slip = dpt.norm()
+                    if slip > 1e-12:
+                        t = -dpt / slip
+                        wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
+                        if wt > 0.0:
+                            dlt = slip / wt
+                            if dlt < mu[k] * lam[k]:
+                                apply_pos(x, q, inv_m, inv_i, a, ra, dlt * t, 1.0)
+                                apply_pos(x, q, inv_m, inv_i, b, rb, dlt * t, -1.0)
+            # v = Δx/h, ω = 2 vec(Δq q⁻¹)/h
+            for i in range(nb):
+                if moving[i] != 0 or kin[i] != 0:
+                    v[i] = (x[i] - xp[i]) / h
+                if moving[i] != 0:
+                    w[i] = rot_between(q[i], qp[i]) / h
+            # velocity pass, in order: dynamic friction (at most μλ_n/h of impulse), restitution
+            for k in range(nc):
+                if lam[k] > 0.0:
+                    a, b = ca[k], cb[k]
+                    n = cn[k]
+                    ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
+                    vr = rel_vel(v, w, a, b, ra, rb)
+                    vn = vr.dot(n)
+                    vt = vr - vn * n
+                    vt_len = vt.norm()
+                    dv = vec3(0.0, 0.0, 0.0)
+                    if vt_len > 1e-14:
+                        t = -vt / vt_len
+                        wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
+                        dv += t * ti.min(mu[k] * lam[k] * wt / h, vt_len)
+                    ee = e[k]
+                    if ti.abs(vn0[k]) <= 2.0 * glen * h:
+                        ee = ti.cast(0.0, f64)
+                    dv += n * (-vn + ti.max(-ee * vn0[k], 0.0))
+                    mag = dv.norm()
+                    if mag > 1e-14:
+                        dn = dv / mag
+                        wd = gen_w(q, inv_m, inv_i, a, ra, dn) + gen_w(q, inv_m, inv_i, b, rb, dn)
+                        if wd > 0.0:
+                            p = dv / wd
+                            apply_vel(v, w, q, inv_m, inv_i, a, ra, p, 1.0)
+                            apply_vel(v, w, q, inv_m, inv_i, b, rb, p, -1.0)
+
     def substeps(n, h, g, glen, nc, nj):
         """n substeps of h: a begin, then per substep the joints (if any) and one launch that
         finishes it and begins the next. n = 0 only compiles every kernel (a build pays the
@@ -221,6 +313,10 @@ def _build(F):
             begin(1.0, g, 1.0, 0)
             joints(1.0, 0)
             finish(1.0, glen, 0, g, 1.0, 1.0, 0)
+            whole(0, 1.0, g, glen, 0)
+            return
+        if not nj and F.nb <= WHOLE_MAX_BODIES:
+            whole(n, h, g, glen, nc)
             return
         begin(h, g, 1.0 / n, nc)
         for s in range(n):
