@@ -1,8 +1,9 @@
 """The XPBD substep as one Taichi kernel on float64 fields (Müller et al. 2020; see :mod:`.xpbd`).
 Contacts and joints are solved Gauss–Seidel in their fixed order by serial loops, so the result
 cannot depend on threads (no atomics at all); the per-body stages run in parallel (each body
-writes only its own row). One launch per substep (two with joints): the serial joint loop in the
-same kernel, or the substep loop inside one kernel, took LLVM about a minute to compile."""
+writes only its own row). A scene of up to WHOLE_MAX_BODIES bodies takes a whole step in one
+launch (serial); a larger one one launch per substep (two with joints), its per-body stages
+parallel. The same bytes either way."""
 
 import taichi as ti
 
@@ -55,7 +56,7 @@ def rot_between(q: ti.template(), qp):
     return s * vec3(d[1], d[2], d[3])
 
 
-WHOLE_MAX_BODIES = 64  # up to this many bodies (no joints) a step is one serial launch
+WHOLE_MAX_BODIES = 64  # up to this many bodies a step is one serial launch
 
 
 class Fields:
@@ -217,9 +218,10 @@ def _build(F):
                 x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac2
 
     @ti.kernel
-    def whole(nsub: ti.i32, h: f64, g: vec3, glen: f64, nc: ti.i32):
-        """Every substep of a step without joints in one launch (one thread: the contacts are
-        serial anyway, and at a few dozen bodies a launch costs more than their integration)."""
+    def whole(nsub: ti.i32, h: f64, g: vec3, glen: f64, nc: ti.i32, nj: ti.i32):
+        """Every substep of a step in one launch (one thread: joints and contacts are serial
+        anyway, and at a few dozen bodies a launch costs more than their integration). Costs
+        about 20 s of cold compile with the joints in it, saves half a jointed scene's frame."""
         ti.loop_config(serialize=True)
         for s in range(nsub):
             frac = (s + 1.0) / nsub
@@ -242,6 +244,8 @@ def _build(F):
                     q[i] = add_rot(q[i], h * w[i])
                 elif kin[i] != 0:
                     x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac
+            for jj in range(nj):
+                solve_joint(jj, h, x, q, inv_m, inv_i, *J)
             # the position pass over the contacts, in order: depth, then static friction
             for k in range(nc):
                 a, b = ca[k], cb[k]
@@ -313,10 +317,10 @@ def _build(F):
             begin(1.0, g, 1.0, 0)
             joints(1.0, 0)
             finish(1.0, glen, 0, g, 1.0, 1.0, 0)
-            whole(0, 1.0, g, glen, 0)
+            whole(0, 1.0, g, glen, 0, 0)
             return
-        if not nj and F.nb <= WHOLE_MAX_BODIES:
-            whole(n, h, g, glen, nc)
+        if F.nb <= WHOLE_MAX_BODIES:
+            whole(n, h, g, glen, nc, nj)
             return
         begin(h, g, 1.0 / n, nc)
         for s in range(n):
