@@ -572,6 +572,7 @@ def test_the_farm_shuts_down_with_dask_teardown_logs_silenced():
             logging.getLogger(n).setLevel(level)
 
 
+@pytest.mark.slow
 def test_the_progress_display_says_the_first_frame_compiles(tmp_path, monkeypatch):
     import contextlib
 
