@@ -1,5 +1,5 @@
 import sys
 
-from .tools.main import main
+from particles_tools.main import main
 
 sys.exit(main())

@@ -1,5 +1,5 @@
 """Argument checks for the game API (:mod:`engine.api`), in the command line's one-line style
-(``engine.tools.flags``): ``move_collider: position: [nan, 0.0, 0.0] is not allowed: must be 3 finite
+(``particles_tools.flags``): ``move_collider: position: [nan, 0.0, 0.0] is not allowed: must be 3 finite
 numbers within ±1e+06``. Each checker returns the value in the form the engine stores (a float, an
 int, a tuple of floats) or raises ``TypeError`` (wrong kind of value), ``ValueError`` (right kind,
 not allowed: NaN, ±inf, out of range, wrong length) or ``KeyError`` (no such name). Pure Python

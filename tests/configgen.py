@@ -15,7 +15,7 @@ from typing import Optional, Tuple
 
 from hypothesis import strategies as st
 
-from engine.tools.wedge.tomlout import toml_key as _key, toml_value as _value
+from particles_tools.wedge.tomlout import toml_key as _key, toml_value as _value
 
 DELETE = object()
 

@@ -2,7 +2,7 @@
 every command with what it accepts, and strategies that draw one value it must refuse. The
 refusal must be one line naming the flag (``error: --h: ...``), exit 2, nothing written.
 
-Kinds (each with its own idea of "bad", written here independently of engine/tools/flags.py):
+Kinds (each with its own idea of "bad", written here independently of particles_tools/flags.py):
 ``("int", lo, hi)``, ``("real", lo, hi, lo_open)``, ``("size",)`` (WxH, 16..8192),
 ``("folder",)`` (not empty), ``("choice", allowed...)``, ``("bytes",)`` (4GB, 512MB, 100).
 """

@@ -14,7 +14,7 @@ ENV = dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=ROOT)
 
 def call(*argv):
     """``particles`` in this process: (exit code, stdout, stderr)."""
-    from engine.tools import main as cli
+    from particles_tools import main as cli
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):

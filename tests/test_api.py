@@ -147,7 +147,7 @@ def test_game_example_runs_headless():
     """The pygame example, headless: contacts flash the ball, sparks fly on landings, the level
     restarts by reusing its scene, and the overlay composites over the game's own frame."""
     from engine import reuse
-    from engine.tools.examples.sphere_game import SKY_TOP, run_headless
+    from particles_tools.examples.sphere_game import SKY_TOP, run_headless
 
     reused = reuse.counts["reused"]
     game = run_headless(330, size=(160, 90), fps=50.0, restart_every=3.0, quiet=True)

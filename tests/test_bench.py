@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from engine.tools import bench
-from engine.tools.bench import cloth
+from particles_tools import bench
+from particles_tools.bench import cloth
 
 EXPECTED = {
     "step": ["engine step 20k", "fused kernel alone 20k", "NumPy in-place 20k", "bandwidth limit 20k",

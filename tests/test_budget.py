@@ -1,5 +1,5 @@
 """The budget's memory estimate against the Taichi fields and ndarrays a real scene allocates once
-it has drawn a frame: the estimate is read off the definitions by hand (engine/tools/budget.py), so
+it has drawn a frame: the estimate is read off the definitions by hand (particles_tools/budget.py), so
 a pool, renderer or spring network that grows must fail here rather than let the budget go stale."""
 import math
 
@@ -8,7 +8,7 @@ import taichi as ti
 
 from engine.config import load_config
 from engine.scene import Scene
-from engine.tools import budget
+from particles_tools import budget
 
 _BYTES = {ti.f32: 4, ti.i32: 4, ti.u32: 4, ti.u8: 1, ti.i8: 1, ti.f64: 8, ti.i64: 8, ti.u64: 8,
           ti.f16: 2, ti.i16: 2, ti.u16: 2}

@@ -537,7 +537,7 @@ def test_the_farm_shuts_down_with_dask_teardown_logs_silenced():
     import logging
 
     pytest.importorskip("distributed")
-    from engine.tools.wedge import farm
+    from particles_tools.wedge import farm
 
     seen = {}
 
@@ -572,10 +572,11 @@ def test_the_farm_shuts_down_with_dask_teardown_logs_silenced():
             logging.getLogger(n).setLevel(level)
 
 
+@pytest.mark.slow
 def test_the_progress_display_says_the_first_frame_compiles(tmp_path, monkeypatch):
     import contextlib
 
-    from engine.tools import commands, progress
+    from particles_tools import commands, progress
 
     notes = []
 
@@ -601,7 +602,7 @@ def test_the_progress_display_says_the_first_frame_compiles(tmp_path, monkeypatc
 def test_list_works_outside_the_checkout(tmp_path, monkeypatch):
     import shutil
 
-    import engine.tools as tools
+    import particles_tools as tools
 
     monkeypatch.chdir(tmp_path)  # no configs/ here
     code, stdout, stderr = _call("list")
@@ -630,7 +631,7 @@ def test_the_wheel_ships_the_configs():
     with open(os.path.join(root, "pyproject.toml"), "rb") as fh:
         py = tomllib.load(fh)
     assert py["tool"]["setuptools"]["data-files"]["share/particles-engine/configs"] == ["configs/*.toml"]
-    from engine.tools import INSTALLED_CONFIGS
+    from particles_tools import INSTALLED_CONFIGS
 
     assert INSTALLED_CONFIGS.endswith(os.path.join("share", "particles-engine", "configs"))
 

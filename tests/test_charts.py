@@ -8,10 +8,10 @@ import pytest
 pytest.importorskip("matplotlib")
 pytest.importorskip("scipy")
 
-from engine.tools.charts import run_charts  # noqa: E402
-from engine.tools.charts.workprec import FIELDS, fixed_slope  # noqa: E402
+from particles_tools.charts import run_charts  # noqa: E402
+from particles_tools.charts.workprec import FIELDS, fixed_slope  # noqa: E402
 from engine.ode import solve  # noqa: E402
-from engine.tools.problems import DAMPED_SPRING  # noqa: E402
+from particles_tools.problems import DAMPED_SPRING  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +137,7 @@ def test_step_doubling_evaluations_against_rk45_at_equal_error(quick_charts):
     # issue 14's target is 1.5× RK45's f-evaluations at equal error: met at loose tolerances on
     # Lotka–Volterra (measured 1.14–1.35 down to 1e-5), missed at tight ones (→ 2.1 at 5e-11: a
     # doubled RK4 step costs 11 evaluations for order 5, RK45 6); never beyond 2.5× on the four
-    from engine.tools.charts.workprec import equal_error_ratio
+    from particles_tools.charts.workprec import equal_error_ratio
 
     out, _ = quick_charts
     for name in ("lotka-volterra", "kepler", "kepler-0.6", "arenstorf"):

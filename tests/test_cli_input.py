@@ -223,7 +223,7 @@ def test_second_signal_ends_the_process_at_once(tmp_path):
     script = tmp_path / "stuck.py"
     script.write_text(
         "import os, signal, sys, time\n"
-        "from engine.tools.signals import StopRequest\n"
+        "from particles_tools.signals import StopRequest\n"
         "with StopRequest(raise_now=False) as stop:\n"
         "    os.kill(os.getpid(), signal.SIGTERM)\n"
         "    while not stop.requested:\n"
@@ -242,8 +242,8 @@ def test_second_signal_ends_the_process_at_once(tmp_path):
 
 def test_parser_choices_match_the_engine():
     from engine import runtime
-    from engine.tools import cli
-    from engine.tools.problems import PROBLEMS
+    from particles_tools import cli
+    from particles_tools.problems import PROBLEMS
 
     assert cli.ARCH_CHOICES == runtime.ARCHES  # kept apart: `validate` imports no Taichi
     assert set(cli.PROBLEM_NAMES) == set(PROBLEMS)

@@ -37,7 +37,7 @@ def test_list_validate_schema_ode(tmp_path):
 
 def test_chart_writes_every_chart(tmp_path):
     """The whole ``particles chart`` (every chart, quick sweeps): it segfaulted before."""
-    from engine.tools.charts import CHARTS
+    from particles_tools.charts import CHARTS
 
     r = ok(particles("chart", "--quick", "--quiet", "--out", tmp_path))
     written = {os.path.basename(p) for p in r.stdout.split()}

@@ -8,7 +8,7 @@ import pytest
 import taichi as ti
 
 from engine.api import SceneBuilder
-from engine.tools import bounce
+from particles_tools import bounce
 
 pytest.importorskip("scipy")
 

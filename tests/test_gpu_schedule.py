@@ -82,7 +82,16 @@ ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE st
            # correction sees the ones before it: the deterministic alternative to float atomics);
            # rigid bodies are few and their f64 state lives on the CPU
            "_build.<locals>.joints": "rigid XPBD joints, Gauss-Seidel",
-           "_build.<locals>.finish": "rigid XPBD contacts and velocity pass, Gauss-Seidel",
+           # fixed-order f64 energy sums: diagnostics read when asked (scene.energy()), not a frame's work
+           "spring_energy": "soft-body spring energy, serial f64 sum in spring order",
+           "_energy": "energy terms of an element group, serial f64 sum in element order",
+           "UserEnergy._build.<locals>.total": "a user energy's total, serial f64 sum in element order",
+           # per frame, but short: level 2 of the grid's prefix scan over block totals (T/1024 adds)
+           # and the births moved to free slots, one thread per emitter in plan order (only when a
+           # ring's head meets live particles); on a GPU these want the binning's chunked scan
+           "HashGrid.build": "neighbour grid: level-2 scan of the block totals on one thread",
+           "spawn_children": "sub-emitter children moved to free slots in rank order, one thread",
+           "_build.<locals>.finish": "rigid XPBD: a substep's end and the next one's start, Gauss-Seidel",
            "_build.<locals>.whole": "rigid XPBD: a small scene's whole step on one thread",
            "run_steps": "engine.springs.fused: a small spring network's frame on the CPU backend only "
                         "(SpringSystem._fusable checks the arch; a GPU keeps the parallel per-phase "

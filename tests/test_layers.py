@@ -1,7 +1,7 @@
 """The layers of the code, read from the imports (AST, nothing is imported or run).
 
 Rules (README, "How the code is laid out"):
-- the core never imports the tools (``engine.tools``);
+- the core never imports the tools (``particles_tools``);
 - ``engine.ode`` imports nothing of particles, springs, scene, config, render, api, control,
   colliders or bodies;
 - the config package's import closure holds no Taichi (validating a file needs no compiler);
@@ -63,7 +63,7 @@ def sources(extra=None):
     """{module: (source, is_package)} for every module of engine/ and effects/; ``extra`` adds or
     replaces sources for planted violations."""
     out = {}
-    for top in ("engine", "effects"):
+    for top in ("engine", "effects", "particles_tools"):
         for dp, _, files in os.walk(os.path.join(ROOT, top)):
             for f in files:
                 if f.endswith(".py"):
@@ -170,9 +170,9 @@ def violations(g, src=None):
     rules that read attribute names, not only imports."""
     bad = []
     for m, deps in g.items():
-        if in_pkg(m, "engine") and not in_pkg(m, "engine.tools") and m != "engine.__main__":
+        if in_pkg(m, "engine") and not in_pkg(m, "particles_tools") and m != "engine.__main__":
             bad += [f"{m} imports {d} (the core never imports the tools)"
-                    for d in deps if in_pkg(d, "engine.tools")]
+                    for d in deps if in_pkg(d, "particles_tools")]
         if in_pkg(m, "engine.ode"):
             for layer in ("engine.particles", "engine.springs", "engine.scene", "engine.config",
                           "engine.render", "engine.api", "engine.bodies", "engine.control",
@@ -234,8 +234,8 @@ def test_config_imports_no_taichi_when_run():
 
 
 @pytest.mark.parametrize("name, source, pkg, rule", [
-    ("engine.scene", "from .tools import cli\n", False, "never imports the tools"),
-    ("engine.render.raster", "from ..tools.bench import common\n", False, "never imports the tools"),
+    ("engine.scene", "from particles_tools import cli\n", False, "never imports the tools"),
+    ("engine.render.raster", "import particles_tools.bench.common\n", False, "never imports the tools"),
     ("engine.ode.ivp", "from ..particles.pool import ParticleState\n", False, "stands alone"),
     ("engine.ode.ivp", "import engine.scene\n", False, "stands alone"),
     ("engine.ode.driver", "from ..control import Control\n", False, "stands alone"),
@@ -244,7 +244,7 @@ def test_config_imports_no_taichi_when_run():
     ("engine.springs.system", "from ..ode.tableau import TABLEAUS\n", False, "tableau coefficients"),
     ("engine.springs.stability", "from ..ode import RK4\n", False, "tableau coefficients"),
     ("engine.particles.system", "b = METHODS[name].scheme.b\n", False, "tableau coefficients"),
-    ("engine.tools.bench.step", "g = TAB.stability_polynomial()\n", False, "tableau coefficients"),
+    ("particles_tools.bench.step", "g = TAB.stability_polynomial()\n", False, "tableau coefficients"),
     ("engine.particles.system", "from ..ode.controller import StepDoublingController\n", False,
      "only the driver calls the controller"),
     ("engine.springs.system", "from ..ode import StepDoublingController\n", False,

@@ -12,7 +12,7 @@ import taichi as ti
 from engine.ode import METHODS, TABLEAUS, ButcherTableau, StepDoublingController, solve
 from engine.ode.driver import clip_to_target
 from engine.ode.steppers import doubling_step
-from engine.tools.problems import DAMPED_SPRING, DRAG, GROWTH, LOTKA_VOLTERRA, OSCILLATOR
+from particles_tools.problems import DAMPED_SPRING, DRAG, GROWTH, LOTKA_VOLTERRA, OSCILLATOR
 
 
 def test_tableaus_satisfy_invariants():

@@ -44,7 +44,7 @@ def write_cfg(folder, name="fx", frames=6, h=0.0333334, rate=400.0, drag=0.4):
 
 
 def test_variant_configs_are_written_as_toml_that_reads_back_equal():
-    from engine.tools.wedge.tomlout import dumps
+    from particles_tools.wedge.tomlout import dumps
 
     data = {"name": 'say "hi"\n\u00e9\U0001f525', "seed": 7, "h": 0.004166667, "on": False,
             "odd key": {"a.b": [1, 2.5, -3e-9], "empty": []},
@@ -63,7 +63,7 @@ def read_index(out):
 @pytest.fixture(scope="module")
 def cluster():
     """Two worker processes, one task thread each, as ``particles wedge`` starts by default."""
-    from engine.tools.wedge.farm import local_cluster
+    from particles_tools.wedge.farm import local_cluster
 
     c = local_cluster(2)
     yield c
