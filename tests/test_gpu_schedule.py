@@ -92,6 +92,7 @@ ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE st
            "HashGrid.build": "neighbour grid: level-2 scan of the block totals on one thread",
            "spawn_children": "sub-emitter children moved to free slots in rank order, one thread",
            "_build.<locals>.finish": "rigid XPBD: a substep's end and the next one's start, Gauss-Seidel",
+           "_build.<locals>.whole": "rigid XPBD: a small scene's whole step on one thread",
            "run_steps": "engine.springs.fused: a small spring network's frame on the CPU backend only "
                         "(SpringSystem._fusable checks the arch; a GPU keeps the parallel per-phase "
                         "launches): one thread beats 4-16 launches a substep there"}

@@ -1,8 +1,9 @@
 """The XPBD substep as one Taichi kernel on float64 fields (Müller et al. 2020; see :mod:`.xpbd`).
 Contacts and joints are solved Gauss–Seidel in their fixed order by serial loops, so the result
 cannot depend on threads (no atomics at all); the per-body stages run in parallel (each body
-writes only its own row). One launch per substep (two with joints): the serial joint loop in the
-same kernel, or the substep loop inside one kernel, took LLVM about a minute to compile."""
+writes only its own row). A scene of up to WHOLE_MAX_BODIES bodies takes a whole step in one
+launch (serial); a larger one one launch per substep (two with joints), its per-body stages
+parallel. The same bytes either way."""
 
 import taichi as ti
 
@@ -55,6 +56,9 @@ def rot_between(q: ti.template(), qp):
     return s * vec3(d[1], d[2], d[3])
 
 
+WHOLE_MAX_BODIES = 64  # up to this many bodies a step is one serial launch
+
+
 class Fields:
     """The float64 fields one rigid system steps (Taichi fields: a launch with NumPy arrays as
     arguments cost ~20 µs per array here, a launch of a kernel on fields ~20 µs in all).
@@ -96,27 +100,106 @@ def _build(F):
     J = (F.jt, F.ja, F.jb, F.jra, F.jrb, F.jaxa, F.jaxb, F.jpa, F.jpb, F.jqrel, F.jlo, F.jhi, F.jlim, F.jalpha)
     nb = F.nb
 
+    # -- one element of each stage (the kernels below only loop over them) ----------------------
+    @ti.func
+    def arms(k):
+        a, b, n = ca[k], cb[k], cn[k]
+        return a, b, n, arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
+
+    @ti.func
+    def normal_speed(k):
+        """ṽ_n of contact k before the substep (restitution)."""
+        a, b, n, ra, rb = arms(k)
+        vn0[k] = rel_vel(v, w, a, b, ra, rb).dot(n)
+
+    @ti.func
+    def integrate(i, h, g, frac):
+        """Keep body i's pose; v += hg, x += hv, ω with the gyroscopic term, q += ½h[ω, 0]q (a
+        body on a path: where its path is at ``frac`` of the step)."""
+        xp[i] = x[i]
+        qp[i] = q[i]
+        if moving[i] != 0:
+            v[i] += h * g
+            x[i] += h * v[i]
+            wb = qrot_inv(q[i], w[i])
+            I = inertia[i]
+            wb += h * (-wb.cross(I * wb)) / I
+            w[i] = qrot(q[i], wb)
+            q[i] = add_rot(q[i], h * w[i])
+        elif kin[i] != 0:
+            x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac
+
+    @ti.func
+    def depth(k):
+        """Contact k's penetration d = (p_b − p_a)·n resolved: λ_n = Δλ."""
+        a, b, n, ra, rb = arms(k)
+        lam[k] = 0.0
+        d = (point_b(x, crb, b, k, rb) - x[a] - ra).dot(n)
+        if d > 0.0:
+            lam[k] = positional(x, q, inv_m, inv_i, a, b, ra, rb, d * n, 0.0)
+
+    @ti.func
+    def static_friction(k):
+        """Once every depth is resolved (λ_n final): undo contact k's tangential slip over the
+        substep where that takes less than μ λ_n."""
+        if lam[k] > 0.0:
+            a, b, n, ra, rb = arms(k)
+            dp = x[a] + ra - xp[a] - qrot(qp[a], qrot_inv(q[a], ra))
+            if b >= 0:
+                dp -= x[b] + rb - xp[b] - qrot(qp[b], qrot_inv(q[b], rb))
+            dpt = dp - dp.dot(n) * n
+            slip = dpt.norm()
+            if slip > 1e-12:
+                t = -dpt / slip
+                wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
+                if wt > 0.0:
+                    dlt = slip / wt
+                    if dlt < mu[k] * lam[k]:
+                        apply_pos(x, q, inv_m, inv_i, a, ra, dlt * t, 1.0)
+                        apply_pos(x, q, inv_m, inv_i, b, rb, dlt * t, -1.0)
+
+    @ti.func
+    def velocity(i, h):
+        """v = Δx/h, ω = 2 vec(Δq q⁻¹)/h."""
+        if moving[i] != 0 or kin[i] != 0:
+            v[i] = (x[i] - xp[i]) / h
+        if moving[i] != 0:
+            w[i] = rot_between(q[i], qp[i]) / h
+
+    @ti.func
+    def velocity_pass(k, h, glen):
+        """Dynamic friction (at most μλ_n/h of impulse) and restitution at contact k."""
+        if lam[k] > 0.0:
+            a, b, n, ra, rb = arms(k)
+            vr = rel_vel(v, w, a, b, ra, rb)
+            vn = vr.dot(n)
+            vt = vr - vn * n
+            vt_len = vt.norm()
+            dv = vec3(0.0, 0.0, 0.0)
+            if vt_len > 1e-14:
+                t = -vt / vt_len
+                wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
+                dv += t * ti.min(mu[k] * lam[k] * wt / h, vt_len)
+            ee = e[k]
+            if ti.abs(vn0[k]) <= 2.0 * glen * h:
+                ee = ti.cast(0.0, f64)
+            dv += n * (-vn + ti.max(-ee * vn0[k], 0.0))
+            mag = dv.norm()
+            if mag > 1e-14:
+                dn = dv / mag
+                wd = gen_w(q, inv_m, inv_i, a, ra, dn) + gen_w(q, inv_m, inv_i, b, rb, dn)
+                if wd > 0.0:
+                    p = dv / wd
+                    apply_vel(v, w, q, inv_m, inv_i, a, ra, p, 1.0)
+                    apply_vel(v, w, q, inv_m, inv_i, b, rb, p, -1.0)
+
+    # -- kernels ----------------------------------------------------------------------------------
     @ti.kernel
     def begin(h: f64, g: vec3, frac: f64, nc: ti.i32):
-        # ṽ_n of every contact before the substep (restitution)
         for k in range(nc):
-            a, b = ca[k], cb[k]
-            n = cn[k]
-            vn0[k] = rel_vel(v, w, a, b, arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)).dot(n)
-        # integrate: v += hg, x += hv, ω with the gyroscopic term, q += ½h[ω, 0]q
+            normal_speed(k)
         for i in range(nb):
-            xp[i] = x[i]
-            qp[i] = q[i]
-            if moving[i] != 0:
-                v[i] += h * g
-                x[i] += h * v[i]
-                wb = qrot_inv(q[i], w[i])
-                I = inertia[i]
-                wb += h * (-wb.cross(I * wb)) / I
-                w[i] = qrot(q[i], wb)
-                q[i] = add_rot(q[i], h * w[i])
-            elif kin[i] != 0:
-                x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac
+            integrate(i, h, g, frac)
 
     @ti.kernel
     def joints(h: f64, nj: ti.i32):
@@ -126,108 +209,65 @@ def _build(F):
 
     @ti.kernel
     def finish(h: f64, glen: f64, nc: ti.i32, g: vec3, h2: f64, frac2: f64, more: ti.i32):
-        """The rest of a substep (contacts, velocities, velocity pass) and, when ``more``, the
-        start of the next (one launch where there were three)."""
-        # the position pass over the contacts, in order: depth, then static friction
+        """The rest of a substep (contacts in order, velocities, the velocity pass in order) and,
+        when ``more``, the start of the next: one launch where there were three."""
         ti.loop_config(serialize=True)
         for k in range(nc):
-            a, b = ca[k], cb[k]
-            n = cn[k]
-            lam[k] = 0.0
-            ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
-            d = (point_b(x, crb, b, k, rb) - x[a] - ra).dot(n)
-            if d > 0.0:
-                lam[k] = positional(x, q, inv_m, inv_i, a, b, ra, rb, d * n, 0.0)
-        # static friction once every depth is resolved (λ_n final): undo the contact points'
-        # tangential slip over the substep where it takes less than μ λ_n
+            depth(k)
         ti.loop_config(serialize=True)
         for k in range(nc):
-            if lam[k] > 0.0:
-                a, b = ca[k], cb[k]
-                n = cn[k]
-                ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
-                dp = x[a] + ra - xp[a] - qrot(qp[a], qrot_inv(q[a], ra))
-                if b >= 0:
-                    dp -= x[b] + rb - xp[b] - qrot(qp[b], qrot_inv(q[b], rb))
-                dpt = dp - dp.dot(n) * n
-                slip = dpt.norm()
-                if slip > 1e-12:
-                    t = -dpt / slip
-                    wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
-                    if wt > 0.0:
-                        dlt = slip / wt
-                        if dlt < mu[k] * lam[k]:
-                            apply_pos(x, q, inv_m, inv_i, a, ra, dlt * t, 1.0)
-                            apply_pos(x, q, inv_m, inv_i, b, rb, dlt * t, -1.0)
-        # v = Δx/h, ω = 2 vec(Δq q⁻¹)/h
+            static_friction(k)
         for i in range(nb):
-            if moving[i] != 0 or kin[i] != 0:
-                v[i] = (x[i] - xp[i]) / h
-            if moving[i] != 0:
-                w[i] = rot_between(q[i], qp[i]) / h
-        # velocity pass, in order: dynamic friction (at most μλ_n/h of impulse), restitution
+            velocity(i, h)
         ti.loop_config(serialize=True)
         for k in range(nc):
-            if lam[k] > 0.0:
-                a, b = ca[k], cb[k]
-                n = cn[k]
-                ra, rb = arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)
-                vr = rel_vel(v, w, a, b, ra, rb)
-                vn = vr.dot(n)
-                vt = vr - vn * n
-                vt_len = vt.norm()
-                dv = vec3(0.0, 0.0, 0.0)
-                if vt_len > 1e-14:
-                    t = -vt / vt_len
-                    wt = gen_w(q, inv_m, inv_i, a, ra, t) + gen_w(q, inv_m, inv_i, b, rb, t)
-                    dv += t * ti.min(mu[k] * lam[k] * wt / h, vt_len)
-                ee = e[k]
-                if ti.abs(vn0[k]) <= 2.0 * glen * h:
-                    ee = ti.cast(0.0, f64)
-                dv += n * (-vn + ti.max(-ee * vn0[k], 0.0))
-                mag = dv.norm()
-                if mag > 1e-14:
-                    dn = dv / mag
-                    wd = gen_w(q, inv_m, inv_i, a, ra, dn) + gen_w(q, inv_m, inv_i, b, rb, dn)
-                    if wd > 0.0:
-                        p = dv / wd
-                        apply_vel(v, w, q, inv_m, inv_i, a, ra, p, 1.0)
-                        apply_vel(v, w, q, inv_m, inv_i, b, rb, p, -1.0)
-        # the next substep's start        # ṽ_n of every contact before the substep (restitution)
+            velocity_pass(k, h, glen)
         for k in range(nc * more):
-            a, b = ca[k], cb[k]
-            n = cn[k]
-            vn0[k] = rel_vel(v, w, a, b, arm_a(q, cra, rnd_a, a, k, n), arm_b(q, crb, rnd_b, b, k, n)).dot(n)
-        # integrate: v += hg, x += hv, ω with the gyroscopic term, q += ½h[ω, 0]q
+            normal_speed(k)
         for i in range(nb * more):
-            xp[i] = x[i]
-            qp[i] = q[i]
-            if moving[i] != 0:
-                v[i] += h2 * g
-                x[i] += h2 * v[i]
-                wb = qrot_inv(q[i], w[i])
-                I = inertia[i]
-                wb += h2 * (-wb.cross(I * wb)) / I
-                w[i] = qrot(q[i], wb)
-                q[i] = add_rot(q[i], h2 * w[i])
-            elif kin[i] != 0:
-                x[i] = kx0[i] + (kx1[i] - kx0[i]) * frac2
+            integrate(i, h2, g, frac2)
+
+    @ti.kernel
+    def whole(nsub: ti.i32, h: f64, g: vec3, glen: f64, nc: ti.i32, nj: ti.i32):
+        """Every substep of a step in one launch (one thread: joints and contacts are serial
+        anyway, and at a few dozen bodies a launch costs more than their integration). About 20 s
+        of cold compile with the joints in it; it halves a jointed scene's frame."""
+        ti.loop_config(serialize=True)
+        for s in range(nsub):
+            for k in range(nc):
+                normal_speed(k)
+            for i in range(nb):
+                integrate(i, h, g, (s + 1.0) / nsub)
+            for j in range(nj):
+                solve_joint(j, h, x, q, inv_m, inv_i, *J)
+            for k in range(nc):
+                depth(k)
+            for k in range(nc):
+                static_friction(k)
+            for i in range(nb):
+                velocity(i, h)
+            for k in range(nc):
+                velocity_pass(k, h, glen)
 
     def substeps(n, h, g, glen, nc, nj):
-        """n substeps of h: a begin, then per substep the joints (if any) and one launch that
-        finishes it and begins the next. n = 0 only compiles every kernel (a build pays the
-        compile, not the frame where the first contact or joint appears)."""
+        """n substeps of h: in one launch (up to WHOLE_MAX_BODIES bodies), else a begin, then per
+        substep the joints (if any) and one launch that finishes it and begins the next. n = 0
+        only compiles every kernel (a build pays the compile, not the frame where the first
+        contact or joint appears)."""
         if n == 0:
             begin(1.0, g, 1.0, 0)
             joints(1.0, 0)
             finish(1.0, glen, 0, g, 1.0, 1.0, 0)
+            whole(0, 1.0, g, glen, 0, 0)
+            return
+        if F.nb <= WHOLE_MAX_BODIES:
+            whole(n, h, g, glen, nc, nj)
             return
         begin(h, g, 1.0 / n, nc)
         for s in range(n):
             if nj:
                 joints(h, nj)
-            more = int(s + 1 < n)
-            finish(h, glen, nc, g, h, (s + 2.0) / n, more)
+            finish(h, glen, nc, g, h, (s + 2.0) / n, int(s + 1 < n))
 
     return substeps
 

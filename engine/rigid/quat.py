@@ -1,5 +1,5 @@
 """Unit quaternions [w, x, y, z] on NumPy arrays of shape (..., 4), float64: products, rotation of
-vectors, and the small-rotation update q ← q + ½[ω, 0] q (Müller et al. 2020, Baraff's q̇ = ½ ω q)."""
+vectors, matrices (the kernels' own copies are in engine.rigid.kernel)."""
 from __future__ import annotations
 
 import numpy as np
@@ -58,19 +58,6 @@ def matrix(q):
 def normalize(q):
     q = np.asarray(q, np.float64)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-def add_rotation(q, rot):
-    """q + ½[rot, 0] q, normalised: q turned by the small rotation vector ``rot`` (rad, world)."""
-    dq = mul(np.concatenate([np.zeros(rot.shape[:-1] + (1,)), rot], -1), q)
-    return normalize(q + 0.5 * dq)
-
-
-def rotation_between(q, q_prev):
-    """The rotation vector taking q_prev to q (2 vec(q q_prev⁻¹), the shorter way round)."""
-    d = mul(q, conj(q_prev))
-    s = np.where(d[..., :1] < 0.0, -2.0, 2.0)
-    return s * d[..., 1:]
 
 
 def from_axis_angle(axis, angle):

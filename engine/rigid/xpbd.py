@@ -2,16 +2,16 @@
 Simulation with Extended Position Based Dynamics"), substep by substep:
 
 1. integrate: v += h g; x += h v; ω += h I⁻¹(−ω × Iω) (body frame); q += ½h[ω, 0]q, normalised;
-2. position solve: joints (in config order), then contacts colour by colour: d = (p_b − p_a)·n,
-   Δλ = d / (w_a + w_b) with w = 1/m + (r × n)ᵀ I⁻¹ (r × n); static friction undoes the contact
-   points' tangential slip when its Δλ_t < μ λ_n;
+2. position solve: joints (in config order), then every contact's depth d = (p_b − p_a)·n,
+   Δλ = d / (w_a + w_b) with w = 1/m + (r × n)ᵀ I⁻¹ (r × n), then static friction, which undoes
+   the contact points' tangential slip where its Δλ_t < μ λ_n;
 3. v = Δx/h, ω = 2 vec(Δq q⁻¹)/h;
 4. velocity solve: dynamic friction (a tangential impulse of at most μ λ_n / h) and restitution
    (v_n ← −e ṽ_n, the normal velocity before the substep; e = 0 when |ṽ_n| ≤ 2|g|h).
 
 Determinism: contacts are kept in a fixed order (the static shapes', then sorted body pairs) and
-solved Gauss–Seidel in that order by one serial kernel per step (:mod:`.kernel`): no sum depends
-on a thread's timing, so 1 and 2 threads give the same bytes.
+solved Gauss–Seidel in that order by serial kernel loops (:mod:`.kernel`): no sum depends on a
+thread's timing, so 1 and 2 threads give the same bytes.
 Friction combines the two materials' μ by their average (two μ = 0.5 slide as μ = 0.5),
 restitution by the larger e.
 """
@@ -29,7 +29,7 @@ class ContactSet:
     world point when b = −1), ``round_a``/``round_b`` (a sphere's radius: its anchor is re-aimed
     along ∓n each substep, so a rolling ball keeps touching at its lowest point), ``mu``
     (average of the two), ``e`` (the larger), ``lam`` (the last substep's normal multipliers),
-    ``vn0`` (pre-substep normal speed) and ``source`` (what b is: a body's or a collider's name)."""
+    ``depth`` (at the step's start) and ``source`` (what b is: a body's or a collider's name)."""
 
     def __init__(self, model, state, a, b, pa, pb, n, mu_b, e_b, statics=()):
         K = len(a)
@@ -46,7 +46,6 @@ class ContactSet:
         self.mu = 0.5 * (model.body_friction[a] + mu_b)
         self.e = np.maximum(model.body_restitution[a], e_b)
         self.lam = np.zeros(K)
-        self.vn0 = np.zeros(K)
         self.depth = np.einsum("ij,ij->i", pb - pa, self.n)
         self._names, self._statics = model.names, list(statics)
 
@@ -54,14 +53,6 @@ class ContactSet:
     def source(self) -> list:
         """What each contact's b is: a body's name, or a static shape's (b = −1 − its index)."""
         return [self._names[k] if k >= 0 else self._statics[-1 - k] for k in self.b.tolist()]
-
-    def arrays(self):
-        """What the kernel takes, in its order (at least one row: external arrays cannot be empty)."""
-        if self.count:
-            return (self.count, self.a, self.b, self.n, self.ra, self.rb, self.round_a, self.round_b, self.mu,
-                    self.e, self.lam, self.vn0)
-        z3, z1, zi = np.zeros((1, 3)), np.zeros(1), np.zeros(1, np.int32)
-        return (0, zi, zi, z3, z3, z3, z1, z1, z1, z1, np.zeros(1), np.zeros(1))
 
 
 class XPBDSolver:
