@@ -73,8 +73,9 @@ def run(quick: bool = False):
 def _shipped(quick: bool):
     from engine.api import ParticleScene
 
-    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-    path = os.path.join(root, "configs", "jelly_solid.toml")
+    from .. import CONFIGS
+
+    path = os.path.join(CONFIGS, "jelly_solid.toml")
     if not os.path.exists(path):
         return []
     s = ParticleScene.from_file(path)

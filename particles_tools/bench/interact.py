@@ -168,10 +168,11 @@ def config_rows(quick: bool):
     from engine.config.load import load_config
     from engine.scene import Scene
 
-    here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    from .. import CONFIGS as folder
+
     rows = []
     for name in CONFIGS:
-        cfg = load_config(os.path.join(here, "configs", f"{name}.toml"))
+        cfg = load_config(os.path.join(folder, f"{name}.toml"))
         sc = Scene(cfg, width=1280, height=720)
         skip = int(cfg.fps * (0.5 if quick else 1.0))
         for _ in range(skip):

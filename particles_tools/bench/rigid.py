@@ -71,7 +71,7 @@ def _shipped(quick: bool):
     from engine.config.load import read_toml
     from engine.scene import Scene
 
-    root = os.path.join(os.path.dirname(__file__), "..", "..", "..", "configs")
+    from .. import CONFIGS as root
     W, H = (320, 180) if quick else (1280, 720)
     out = []
     for path in sorted(glob.glob(os.path.join(root, "*.toml"))):
