@@ -143,3 +143,39 @@ def test_bad_thread_count_is_bad_input(tmp_path):
     r = particles("--threads", "0", "run", "configs/sparks.toml", "--out", tmp_path / "o")
     assert r.returncode == 2 and "--threads" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_frames_land_in_order_even_when_encoders_finish_out_of_order(tmp_path, monkeypatch):
+    """Encoders run in parallel, but a frame is renamed into place only after the one before it:
+    the visible frames are a prefix of the run at every moment (a SIGKILL leaves no gap)."""
+    import threading
+
+    import numpy as np
+
+    real_encode = output.encode_png
+    release = threading.Event()
+    seen = []
+
+    def encode(img, level=1):
+        if img[0, 0, 0] == 0:  # frame 0 waits until frame 1 has been written under its hidden name
+            assert release.wait(10)
+        return real_encode(img, level)
+
+    def write(path, data):
+        with open(path, "wb") as fh:
+            fh.write(data)
+        if ".frame_00001" in path:  # frame 1 is whole before frame 0: it must still wait for it
+            release.set()
+        seen.append(sorted(f for f in os.listdir(out) if not f.startswith(".")))
+
+    out = tmp_path / "out"
+    out.mkdir()
+    monkeypatch.setattr(output, "encode_png", encode)
+    monkeypatch.setattr(output, "_write_bytes", write)
+    w = output.FrameWriter(str(out), "png", workers=2)
+    for k in range(4):
+        w.submit(k, np.full((4, 4, 3), k, np.uint8))
+    w.close()
+    assert sorted(os.listdir(out)) == [f"frame_{k:05d}.png" for k in range(4)]
+    for names in seen:  # every listing taken while frames were being written: a prefix
+        assert names == [f"frame_{k:05d}.png" for k in range(len(names))], names

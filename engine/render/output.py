@@ -232,6 +232,8 @@ class FrameWriter:
             self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="png-encoder")
             self._slots = threading.BoundedSemaphore(self.workers + 2)
             self._futures = []
+            self._turn = threading.Condition()  # guards _published; frames are renamed in order
+            self._published = self._submitted = None  # last frame renamed / last frame submitted
         else:
             self.workers = 1
             self._q: queue.Queue = queue.Queue(maxsize=4)
@@ -248,20 +250,35 @@ class FrameWriter:
         """The most frames held at once (waiting, encoding, and the one being submitted)."""
         return (int(workers or default_workers()) + 3) if fmt == "png" else 6
 
-    def _write_png(self, index, img):
+    def _write_png(self, index, img, prev):
+        """Encode and write frame ``index`` under its hidden name (in parallel with the other
+        encoders), then rename it into place only after ``prev`` (the frame submitted before it)
+        has been: the visible frames are always a prefix of the run, even after SIGKILL."""
+        path = frame_path(self.out_dir, index)
+        tmp = os.path.join(self.out_dir, f".{os.path.basename(path)}.tmp")
         try:
             failed_at = self._failed_at
             if failed_at is not None and index > failed_at:
                 return  # a frame failed: the run is ending, write nothing after it (frames before
                 # it still are, so the folder ends whole at the failed frame whatever the order)
-            data = encode_png(img, self.compress_level)
-            with replacing(frame_path(self.out_dir, index)) as tmp:
-                _write_bytes(tmp, data)
-            self._done[index] = frame_path(self.out_dir, index)
+            _write_bytes(tmp, encode_png(img, self.compress_level))
+            with self._turn:
+                while self._published != prev and (self._failed_at is None or self._failed_at > index):
+                    self._turn.wait()
+                if self._failed_at is not None and self._failed_at < index:
+                    _discard(tmp)
+                    return
+                os.replace(tmp, path)
+                self._done[index] = path
+                self._published = index
+                self._turn.notify_all()
         except BaseException as e:  # reported to the main thread
-            if self._failed_at is None or index < self._failed_at:
-                self._failed_at = index
-            self._error = self._error or e
+            _discard(tmp)
+            with self._turn:
+                if self._failed_at is None or index < self._failed_at:
+                    self._failed_at = index
+                self._error = self._error or e
+                self._turn.notify_all()  # frames waiting behind this one stop waiting
         finally:
             self._slots.release()
 
@@ -302,7 +319,8 @@ class FrameWriter:
         img = as_rgb(img)
         if self.fmt == "png":
             self._slots.acquire()
-            self._futures.append(self._pool.submit(self._write_png, index, img))
+            self._futures.append(self._pool.submit(self._write_png, index, img, self._submitted))
+            self._submitted = index
         else:
             self._q.put((index, img))
 
