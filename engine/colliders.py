@@ -32,6 +32,15 @@ with ``ti.static``, so a scene with no colliders compiles no collision code, one
 box code, and a shape that does not spin the same arithmetic as before shapes could spin. Poses
 live in fields, set from the scene's Control (engine.control) before each step: moving or turning
 one costs no recompilation.
+
+Rigid bodies' boxes and capsules are the exception: they sit at the table's end as *projected*
+shapes, met by the end-of-step projection only (:meth:`Colliders.project`: a point that ends a
+step inside one is put on its surface and responds to it, the surface point's v + ω × r
+included), through one loop over them that runs at run time, not one unrolled copy per shape. A
+body's box inlined at every site of the located step (about eleven per shape, each spinning)
+cost minutes of compilation for a stack of ten crates; the loop costs one copy whatever the
+count, and a bounding-sphere test per shape. The price: their impacts are not located in time
+inside a step (a point moving more than a shape's thickness in one step could pass through).
 """
 # (no __future__ annotations: Taichi reads the funcs' ti.template() annotations)
 
@@ -128,6 +137,13 @@ class Colliders:
         self.spins = tuple(s.spins for s in self.specs)
         self.kills = tuple(bool(s.kill) for s in self.specs)
         self.rotating = any(self.spins)
+        # rigid bodies' boxes and capsules: the projected shapes, at the table's end (module docstring)
+        projected = [k for k, s in enumerate(self.specs) if s.owner == "rigid" and s.kind in ("box", "capsule")]
+        self.event_count = self.count - len(projected)  # the shapes whose impacts are located
+        if projected != list(range(self.event_count, self.count)):
+            raise ValueError("colliders: rigid bodies' boxes and capsules must come last in the shape table")
+        if projected and not all(self.spins[k] for k in projected):
+            raise ValueError("colliders: a rigid body's box or capsule must be built to rotate (rotates = true)")
         self.names = tuple(s.name for s in self.specs)
         self.owners = tuple(s.owner for s in self.specs)
         # what a contact names each shape as: (kind, index) — a config's collider by its own
@@ -148,6 +164,9 @@ class Colliders:
             self.collider_axis_z = ti.Vector.field(3, dtype, shape=n)
         if self.rotating:
             self.collider_omega = ti.Vector.field(3, dtype, shape=n)
+        if self.event_count < self.count:  # projected shapes: their kind and bounding radius (m)
+            self.collider_kind = ti.field(ti.i32, shape=n)
+            self.collider_bound = ti.field(dtype, shape=n)
         self._np = np.float64 if dtype == ti.f64 else np.float32
         self._pos = np.zeros((n, 3), self._np)
         self._quat = np.zeros((n, 4))
@@ -161,6 +180,10 @@ class Colliders:
                 self.collider_half[k] = [float(c) for c in s.half_extents]
             elif self.kinds[k] == CAPSULE:
                 self.collider_half[k] = [0.0, float(s.half_length), 0.0]
+            if k >= self.event_count:
+                self.collider_kind[k] = self.kinds[k]
+                self.collider_bound[k] = (float(np.linalg.norm(s.half_extents)) if self.kinds[k] == BOX
+                                          else float(s.half_length) + float(s.radius))
             self._pos[k] = s.position_at(0.0)
         self.collider_point.from_numpy(self._pos)
         self._orient([s.orientation_at(0.0) for s in self.specs], [s.angular_velocity for s in self.specs])
@@ -364,11 +387,17 @@ class Colliders:
         contact function once more: a box's is long)."""
         x = x - g * N
         vc = self.surface_velocity(k, x, lag)
+        return self._bounce(x, v, vc, self.collider_restitution[k], self.collider_friction[k], dv, N)
+
+    @ti.func
+    def _bounce(self, x, v, vc, e_in, mu, dv, N):
+        """The response of a point at x (on the surface) moving at v against a surface point
+        moving at vc, restitution e_in and friction mu (module docstring): (x, v', impact speed, N)."""
         vr = v - vc
         vn_s = vr.dot(N)
         speed = ti.max(-vn_s, 0.0)
         if vn_s < 0.0:
-            e = self.collider_restitution[k]
+            e = e_in
             if e * speed <= ti.max(-N.dot(dv), 0.0):
                 e = ti.cast(0.0, self.dtype)  # rests: held on the surface
             vn = vn_s * N
@@ -376,9 +405,45 @@ class Colliders:
             vt_len = vt.norm()
             scale = ti.cast(0.0, self.dtype)
             if vt_len > 1e-12:
-                scale = ti.max(0.0, 1.0 - self.collider_friction[k] * (1.0 + e) * speed / vt_len)
+                scale = ti.max(0.0, 1.0 - mu * (1.0 + e) * speed / vt_len)
             v = scale * vt - e * vn + vc
         return x, v, speed, N
+
+    @ti.func
+    def projected_contact(self, j, x, lag):
+        """(g, N) of projected shape j (a run-time index: a rigid body's box or capsule) for a
+        point at x, ``lag`` s before the step's end: x is turned forward by ω·lag into the
+        shape's frame at the step's end (as :meth:`contact` does for a spinning box), the normal
+        turned back."""
+        p = self.collider_point[j] - self.collider_vel[j] * lag
+        ax, c, sn = turn(self.collider_omega[j], lag)
+        r = turned(x - p, ax, c, sn)
+        ey = self.collider_normal[j]
+        g, nw = ti.cast(0.0, self.dtype), ey
+        kinds = ti.static(self.kinds[self.event_count:])
+        if ti.static(BOX in kinds and CAPSULE in kinds):  # (only the kinds present are compiled)
+            if self.collider_kind[j] == BOX:
+                g, nw = box_local(r, self.collider_axis_x[j], ey, self.collider_axis_z[j], self.collider_half[j])
+            else:
+                g, nw = capsule_local(r, ey, self.collider_half[j][1], self.collider_radius[j])
+        elif ti.static(BOX in kinds):
+            g, nw = box_local(r, self.collider_axis_x[j], ey, self.collider_axis_z[j], self.collider_half[j])
+        else:
+            g, nw = capsule_local(r, ey, self.collider_half[j][1], self.collider_radius[j])
+        return g - ti.static(self.offset), turned(nw, ax, c, -sn)
+
+    @ti.func
+    def near_projected(self, x):
+        """1 if x is within a projected shape's bounding sphere (grown by ``offset``), else 0: a
+        step ending there is looked at by :meth:`project` (a bound test only: the exact one would
+        inline each shape's contact once more)."""
+        near = 0
+        if ti.static(self.event_count < self.count):
+            for j in range(self.event_count, self.count):
+                reach = self.collider_bound[j] + ti.static(self.offset)
+                if (x - self.collider_point[j]).norm_sqr() < reach * reach:
+                    near = 1
+        return near
 
     @ti.func
     def project(self, x, v, x0, v0, h):
@@ -401,12 +466,40 @@ class Colliders:
                 dv = v - v0 if g0 <= self._band(x0) else zero
                 x, v, speed, n_hit = self._reflect(k, x, v, 0.0, dv, g, N)
                 which = k
+        if ti.static(self.event_count < self.count):  # the projected shapes, in a run-time loop
+            for j in range(self.event_count, self.count):
+                p = self.collider_point[j]
+                reach = self.collider_bound[j] + ti.static(self.offset)
+                if (x - p).norm_sqr() < reach * reach:
+                    g, N = self.projected_contact(j, x, 0.0)
+                    if g < 0.0:
+                        hits += 1
+                        g0, _N0 = self.projected_contact(j, x0, h)
+                        dv = v - v0 if g0 <= self._band(x0) else zero
+                        x = x - g * N
+                        vc = self.collider_vel[j] + self.collider_omega[j].cross(x - p)
+                        x, v, speed, n_hit = self._bounce(x, v, vc, self.collider_restitution[j],
+                                                          self.collider_friction[j], dv, N)
+                        which = j
         return x, v, hits, killed, which, n_hit, speed
 
 
-_SHARED = ("specs", "count", "dtype", "kinds", "spins", "rotating", "names", "owners", "parties", "collider_point",
+@ti.func
+def capsule_local(r, a, half, radius):
+    """(g, N) of the offset r from a capsule's centre, its unit axis a, the segment's half length
+    and the radius (m): the distance from the segment less the radius, the outward normal."""
+    dd = r - ti.min(ti.max(r.dot(a), -half), half) * a
+    dist = dd.norm()
+    N = a
+    if dist > 1e-12:
+        N = dd / dist
+    return dist - radius, N
+
+
+_SHARED = ("specs", "count", "event_count", "dtype", "kinds", "spins", "rotating", "names", "owners", "parties", "collider_point",
            "collider_normal", "collider_radius", "collider_vel", "collider_restitution", "collider_friction",
-           "collider_half", "collider_axis_x", "collider_axis_z", "collider_omega", "_band", "_np")
+           "collider_half", "collider_axis_x", "collider_axis_z", "collider_omega", "collider_kind", "collider_bound",
+           "_band", "_np")
 
 
 @ti.data_oriented

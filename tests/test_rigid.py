@@ -243,3 +243,42 @@ def test_bad_joints_are_one_line_naming_the_key(joint, rigid, key):
         load_config({"rigid_bodies": [{"name": "a", "shape": "sphere", "radius": 0.1}], "joints": [joint],
                      "rigid": rigid})
     assert len(e.value.problems) == 1 and e.value.problems[0].startswith(key), e.value.problems
+
+
+def test_sparks_bounce_off_a_tilted_rigid_box_and_a_capsule_named_as_the_bodies():
+    # issue 22, item 5: particles meet every rigid body as a posed, turning shape. Sparks rain on
+    # a fixed box tilted 30° about z and a fixed capsule lying along x; no live spark ends a
+    # frame inside either, the box's tilt sends them down its slope (−x), and the contact
+    # records name the bodies
+    from engine.api import ParticleScene
+    from engine.geometry.shapes import quat_from_rotvec, signed_distance
+
+    tilt = quat_from_rotvec([0.0, 0.0, math.radians(30.0)]).tolist()
+    lying = quat_from_rotvec([0.0, 0.0, math.pi / 2]).tolist()
+    rain = dict(shape="point", direction=[0.0, -1.0, 0.0], speed=[2.0, 2.0], spread=0.0, rate=400.0,
+                lifetime=3.0)
+    s = ParticleScene.from_dict({
+        "seed": 1, "fps": 60, "forces": {"gravity": [0.0, -G, 0.0]}, "solver": {"h": 1 / 240},
+        "colliders": [GROUND],
+        "emitters": [dict(rain, name="on_box", position=[0.0, 1.5, 0.0]),
+                     dict(rain, name="on_capsule", position=[3.0, 1.5, 0.0])],
+        "rigid_bodies": [
+            {"name": "crate", "shape": "box", "half_extents": [0.5, 0.25, 0.5], "position": [0.0, 0.6, 0.0],
+             "orientation": tilt, "fixed": True, "restitution": 0.2, "friction": 0.1},
+            {"name": "pipe", "shape": "capsule", "radius": 0.2, "half_length": 0.6, "position": [3.0, 0.5, 0.0],
+             "orientation": lying, "fixed": True, "restitution": 0.2, "friction": 0.1}]},
+        contacts=True, render=False)
+    bodies = [("box", [0.0, 0.6, 0.0], tilt, dict(half_extents=(0.5, 0.25, 0.5))),
+              ("capsule", [3.0, 0.5, 0.0], lying, dict(radius=0.2, half_length=0.6))]
+    named = set()
+    for _ in range(60):
+        s.step(1 / 60)
+        p = s.particles()
+        for kind, c, q, shape in bodies:
+            g = np.array([signed_distance(kind, x, c, q, **shape)[0] for x in p["position"]])
+            assert g.min() > -1e-3, (kind, g.min())
+        named |= set(s.contacts().collider_name.tolist())
+    assert {"crate", "pipe"} <= named
+    p = s.particles()
+    on_box = p["position"][p["emitter"] == 0]
+    assert np.median(on_box[:, 0]) < -0.3  # slid down the box's slope, not straight through it

@@ -77,6 +77,55 @@ def test_kernel_distances_match_the_reference_for_moving_spinning_shapes():
         assert (g[k] < 0).sum() > 20, s.kind  # points inside every shape were looked at
 
 
+def test_projected_shapes_match_the_reference_for_moving_spinning_bodies():
+    # a rigid body's box or capsule sits at the table's end, met by a run-time loop
+    # (Colliders.projected_contact): its (g, N) at `lag` before the step's end equal the
+    # reference's for the pose there (p − v·lag, turned by −ω·lag), with and without an offset
+    from engine.colliders import ColliderSpec, Colliders
+    q = quat_from_rotvec([-0.4, 0.2, 0.6])
+    specs = [ColliderSpec("plane", point=(0, -2, 0)),
+             ColliderSpec("box", point=(0, 1, 1), half_extents=(0.3, 0.2, 0.5), orientation=tuple(q),
+                          rotates=True, owner="rigid", owner_index=0),
+             ColliderSpec("capsule", point=(1, 0, 1), radius=0.2, half_length=0.4, orientation=tuple(q),
+                          rotates=True, owner="rigid", owner_index=1)]
+    shape = [None, dict(half_extents=(0.3, 0.2, 0.5)), dict(radius=0.2, half_length=0.4)]
+    c = Colliders(specs, dtype=ti.f64)
+    assert c.event_count == 1 and c.count == 3
+    vel, omega, h, d = np.array([0.4, -0.3, 0.2]), np.array([1.5, -2.0, 0.7]), 0.1, 0.05
+    p1 = np.array([s.point for s in specs], np.float64) + vel * h
+    q1 = [spun(s.orientation, omega, h) for s in specs]
+    c.move_to(h, p1, since=(0.0, p1 - vel * h), orientations=q1, omegas=[[0, 0, 0], omega, omega])
+    view = c.view(d)
+    n, lag = 4000, 0.037
+    X = ti.Vector.field(3, ti.f64, n)
+    Gf = ti.field(ti.f64, (2, 2, n))
+    Nf = ti.Vector.field(3, ti.f64, (2, 2, n))
+
+    @ti.kernel
+    def run(lag: ti.f64):
+        for i in X:
+            for k in ti.static(range(2)):
+                g, nn = c.projected_contact(k + 1, X[i], lag)
+                Gf[0, k, i], Nf[0, k, i] = g, nn
+                g, nn = view.projected_contact(k + 1, X[i], lag)
+                Gf[1, k, i], Nf[1, k, i] = g, nn
+
+    rng = np.random.default_rng(1)
+    x = rng.uniform(-0.5, 1.6, (n, 3))
+    X.from_numpy(x)
+    run(lag)
+    g, nn = Gf.to_numpy(), Nf.to_numpy()
+    for k in (1, 2):
+        p, qk = p1[k] - vel * lag, spun(q1[k], omega, -lag)
+        ref = [signed_distance(specs[k].kind, xi, p, qk, **shape[k]) for xi in x]
+        np.testing.assert_allclose(g[0, k - 1], [r[0] for r in ref], atol=1e-12, err_msg=specs[k].kind)
+        # the view: less the offset (a compile-time constant, rounded to the default f32)
+        np.testing.assert_allclose(g[1, k - 1], g[0, k - 1] - d, atol=1e-8)
+        far = np.abs(g[0, k - 1]) > 1e-9
+        np.testing.assert_allclose(nn[0, k - 1][far], np.array([r[1] for r in ref])[far], atol=1e-9)
+        assert (g[0, k - 1] < 0).sum() > 20, specs[k].kind
+
+
 # -- spinning shapes hand their surface velocity on ------------------------------------------------
 def _spin_scene(boxes: bool):
     """Balls dropped from rest at t = 0, each 1 m above a surface: a sphere spinning about z with

@@ -36,11 +36,14 @@ distance the located point was off the surface (the dense output's error) beyond
 the same way: a step whose impact the Hermite cannot place within the tolerance is rejected and
 retried shorter, so the tolerance bounds the bounce as it bounds the flight.
 
-An event set (duck-typed; :class:`engine.colliders.Colliders` is one) has ``count`` and ``dtype``,
+An event set (duck-typed; :class:`engine.colliders.Colliders` is one) has ``event_count`` (the
+event functions, compile time; ``count`` ≥ it also counts shapes met by projection only) and ``dtype``,
 ``linear(k)`` and ``stops(k)`` (compile-time answers), ``contact(k, x, xd, lag) -> (g, ġ, N)``
 (``lag``: seconds before the step's end: a moving surface is placed where it is then) and
 ``respond(k, x, v, lag, dv) -> (x', v', speed, N)`` and ``project(x, v, x0, v0, h) -> (x', v', hits,
-killed, k, N, speed)`` (held contact at the step's end, :meth:`engine.colliders.Colliders.project`).
+killed, k, N, speed)`` (held contact at the step's end, :meth:`engine.colliders.Colliders.project`)
+and ``near_projected(x) -> 1 | 0`` (whether x is near a shape met by projection only: such a
+step is not clear, so the projection meets it).
 """
 import taichi as ti  # (no __future__ annotations: Taichi reads the funcs' annotations)
 
@@ -114,7 +117,7 @@ def clear_of(events, dtype):
     it looks further). Then the located step is the plain step: no crossing is looked for, and
     the projection holds nothing."""
     band = contact_band(dtype)
-    n_fn = events.count
+    n_fn = events.event_count
 
     @ti.func
     def clear(xa, va, xb, vb, span):
@@ -124,6 +127,9 @@ def clear_of(events, dtype):
             ga, _gda, _Na = events.contact(k, xa, va, span)
             gb, _gdb, _Nb = events.contact(k, xb, vb, 0.0)
             if not (gb >= 0.0 and (ga <= band(xa) or reach2 <= (ga + gb) * (ga + gb))):
+                ok = 0
+        if ti.static(events.event_count < events.count):
+            if ok != 0 and events.near_projected(xb) != 0:
                 ok = 0
         return ok
 
@@ -145,7 +151,7 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
     point, velocity, placed = point_velocity(n)
     eps = _eps(dtype)
     band = contact_band(dtype)
-    n_fn = events.count  # event functions (compile time)
+    n_fn = events.event_count  # event functions (compile time)
 
     @ti.func
     def root(k: ti.template(), xa, va, xb, vb, span, start, glo, gdlo, end, gend, N, tol_g):

@@ -259,7 +259,7 @@ def solve(f: Callable, y0: Sequence[float], t_span: tuple, method: str = "rk4",
     if events is not None:
         if n % 2 or n < 6:
             raise ValueError(f"events: need a second-order state (q, p) with a 3-D point, got {n} components")
-        if any(events.stops(k) for k in range(events.count)):
+        if any(events.stops(k) for k in range(events.event_count)):
             raise ValueError("events: an event that stops the motion (a kill collider) is not supported here")
     K = _kernels(f, method, n, dtype, bool(extrapolate), events)
     K.n_events[None] = 0

@@ -21,6 +21,7 @@ from . import collide, quat
 from .quat import cross
 from .joints import Joints
 from .model import RigidModel, RigidState
+from .shapes import SPHERE
 from .shapes import BOX, mesh
 from .xpbd import ContactSet, XPBDSolver
 
@@ -128,10 +129,15 @@ class RigidSystem(SystemBase):
         shapes = self.shapes()
         coupling.put(self.name, "rigid_shapes", shapes)
         for i, k in self.shape_index.items():
-            # spheres sit in the table unrotated (their contact is the same at any orientation;
-            # ω × r friction from a spinning ball is left out: spinning code costs compile time)
-            self.control.set_collider_pose(k, coupling.t0, coupling.t1, shapes["position"][i], None,
-                                           shapes["velocity"][i])
+            if self.model.body_shape[i] == SPHERE:
+                # spheres sit in the table unrotated (their contact is the same at any
+                # orientation; ω × r friction from a spinning ball is left out)
+                self.control.set_collider_pose(k, coupling.t0, coupling.t1, shapes["position"][i], None,
+                                               shapes["velocity"][i])
+            else:  # boxes and capsules turn with the body: contacts see v + ω × r
+                self.control.set_collider_pose(k, coupling.t0, coupling.t1, shapes["position"][i],
+                                               shapes["orientation"][i], shapes["velocity"][i],
+                                               shapes["angular_velocity"][i])
 
     def shapes(self) -> dict:
         """Every body's shape and pose now, as arrays in body order: ``names``, ``shape`` (codes

@@ -57,15 +57,23 @@ def collider_specs(cfg_colliders):
 
 
 def rigid_shape_specs(cfg):
-    """Rigid spheres in the one shape table (after the config's colliders), named after the body,
-    ``owner`` "rigid", not drawn (the body is); RigidSystem.publish moves each to its body's pose
-    at every coupling step, so particles and spring nodes meet it where it is (v + ω × r at the
-    contact). Boxes and capsules stay out for now: the table unrolls each spinning shape's
-    located-impact code into the particles' fused step (about 11 sites per shape), and ten
-    spinning crates compiled for over three minutes before the first frame."""
-    return [ColliderSpec("sphere", point=b.position, radius=b.radius, restitution=b.restitution,
-                         friction=b.friction, name=b.name, visible=False, owner="rigid", owner_index=i)
-            for i, b in enumerate(cfg.rigid_bodies) if b.shape == "sphere"]
+    """The rigid bodies' shapes in the one shape table (after the config's colliders), named after
+    the body, ``owner`` "rigid", not drawn (the body is); RigidSystem.publish moves each to its
+    body's pose at every coupling step, so particles and spring nodes meet it where it is. Spheres
+    first, as located events (their contact is the same at any orientation; ω × r friction from a
+    spinning ball is left out); then boxes and capsules, turning with their bodies (v + ω × r at
+    the contact) as the table's projected shapes: one run-time loop over them, not a located
+    event each (ten spinning crates unrolled into the particles' step compiled for over three
+    minutes; engine.colliders)."""
+    spheres = [ColliderSpec("sphere", point=b.position, radius=b.radius, restitution=b.restitution,
+                            friction=b.friction, name=b.name, visible=False, owner="rigid", owner_index=i)
+               for i, b in enumerate(cfg.rigid_bodies) if b.shape == "sphere"]
+    solids = [ColliderSpec(b.shape, point=b.position, radius=b.radius or 0.0,
+                           half_extents=tuple(b.half_extents or (0.0, 0.0, 0.0)), half_length=b.half_length or 0.0,
+                           orientation=tuple(b.orientation), rotates=True, restitution=b.restitution,
+                           friction=b.friction, name=b.name, visible=False, owner="rigid", owner_index=i)
+              for i, b in enumerate(cfg.rigid_bodies) if b.shape in ("box", "capsule")]
+    return spheres + solids
 
 
 class Scene:
