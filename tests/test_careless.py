@@ -319,6 +319,81 @@ def test_a_100k_deep_dict_is_one_line_not_a_recursion_error():
         ParticleScene.from_dict({"emitters": nested_list}, render=False)
 
 
+# -- soft bodies: each type takes its own keys -----------------------------------------------------
+# (bodies are a union tagged by ``type``: a key another type reads used to be accepted and ignored)
+OWN_KEYS = {  # every key each type takes besides the ones all bodies take, with a value it accepts
+    "chain": dict(mass=0.02, stiffness=800.0, direction=[1.0, 0.0, 0.0], length=0.5, segments=5,
+                  bend_stiffness=3.0),
+    "hair": dict(mass=0.02, stiffness=800.0, direction=[1.0, 0.0, 0.0], length=0.5, segments=5,
+                 bend_stiffness=3.0, strands=7, roots="line", radius=0.2, cap_angle=30.0,
+                 line_end=[0.5, 1.0, 0.0]),
+    "cloth": dict(mass=0.02, stiffness=800.0, resolution=[5, 6], size=[0.5, 0.6], plane="xy",
+                  bend_stiffness=3.0),
+    "jelly": dict(mass=0.02, stiffness=800.0, resolution=[3, 4, 5], size=[0.3, 0.4, 0.5]),
+    "solid": dict(resolution=[3, 4, 5], size=[0.3, 0.4, 0.5], density=500.0,
+                  material={"model": "stvk", "young": 2e4, "poisson": 0.25}),
+}
+COMMON = dict(name="b", position=[0.0, 2.0, 0.0], damping=0.1, pins=[0], release_at=1.0, integrator="xpbd",
+              substeps=2, iterations=5, max_stretch=0.1, thickness=0.01, color=[1.0, 0.5, 0.0],
+              contacts=True, self_collision=True,
+              pin_path=[{"time": 0.0, "position": [0.0, 0.0, 0.0]}, {"time": 1.0, "position": [0.1, 0.0, 0.0]}])
+
+
+@pytest.mark.parametrize("kind", sorted(OWN_KEYS))
+def test_each_body_type_takes_its_own_keys_and_only_those(kind):
+    from engine.config import load_config
+
+    # energies: every type takes the key, each only the terms that apply to it (a solid: no springs)
+    terms = [{"type": "volume" if kind == "solid" else "spring", "stiffness": 100.0}]
+    body = dict(type=kind, **COMMON, **OWN_KEYS[kind], energies=terms)
+    b = load_config({"bodies": [body]}).bodies[0]
+    assert b.model_dump(include=set(body)) == body  # every key given is kept, none defaulted
+    assert set(type(b).model_fields) == {"type", "energies", *COMMON, *OWN_KEYS[kind]}, "a key came or went"
+
+
+@pytest.mark.parametrize("kind, key, value, owner", [
+    ("cloth", "strands", 40, "hair"), ("chain", "resolution", [4, 4], "cloth, jelly or solid"),
+    ("jelly", "plane", "xy", "cloth"), ("solid", "mass", 0.1, "chain, hair, cloth or jelly"),
+    ("jelly", "material", {"young": 1e4}, "solid"), ("cloth", "density", 10.0, "solid"),
+    ("hair", "plane", "xz", "cloth"), ("chain", "strands", 3, "hair"),
+])
+def test_a_key_of_another_body_type_is_one_line_naming_it(kind, key, value, owner):
+    from engine.config import ConfigError, load_config
+
+    body = dict(type=kind, **{k: v for k, v in OWN_KEYS[kind].items() if k in ("resolution", "size")})
+    with pytest.raises(ConfigError) as e:
+        load_config({"bodies": [dict(body, **{key: value})]})
+    assert e.value.problems == [
+        f"bodies[0].{key}: unknown key: {key} is a key of a {owner} body, not of a {kind} "
+        f"({kind}'s own keys: {', '.join(OWN_KEYS[kind])})"], e.value.problems
+
+
+def test_body_type_errors_list_the_types_and_keep_the_path_without_the_tag():
+    from engine.config import ConfigError, load_config
+
+    types = "'chain', 'hair', 'cloth', 'jelly' or 'solid'"
+    cases = [
+        ({"bodies": [{"type": "blob"}]}, f"bodies[0].type: 'blob' is not allowed; expected {types}"),
+        ({"bodies": [{"strands": 3}]}, f"bodies[0].type: required key is missing; expected {types}"),
+        ({"bodies": [{"type": "chain", "strand": 3}]},
+         "bodies[0].strand: unknown key; did you mean 'strands'? It is a key of a hair body, not of a chain"),
+        ({"bodies": [{"type": "chain", "lenght": 3}]}, "bodies[0].lenght: unknown key; did you mean 'length'?"),
+        ({"bodies": [{"type": "cloth", "resolution": [3, 3, 3]}]},
+         "bodies[0].resolution: cloth needs 2 numbers, got [3, 3, 3]"),
+        ({"bodies": [{"type": "solid", "resolution": [3, 3], "size": [1.0, 1.0, 1.0]}]},
+         "bodies[0].resolution: solid needs 3 numbers, got [3, 3]"),
+        ({"bodies": [{"type": "jelly", "size": [1.0, 1.0, 1.0]}]}, "bodies[0].resolution: required key is missing"),
+        ({"emitters": [{"rate": 1.0}], "colliders": [{"type": "box", "radius": 1.0}]},
+         "colliders[0].radius: unknown key: radius is a key of a sphere or capsule collider, not of a box"),
+        ({"emitters": [{"rate": 1.0}], "colliders": [{"type": "cone"}]},
+         "colliders[0].type: 'cone' is not allowed; expected 'plane', 'sphere', 'box' or 'capsule'"),
+    ]
+    for data, line in cases:
+        with pytest.raises(ConfigError) as e:
+            load_config(data)
+        assert len(e.value.problems) == 1 and e.value.problems[0].startswith(line), (line, e.value.problems)
+
+
 # -- interpolate=True ----------------------------------------------------------------------------
 @pytest.mark.slow  # (two scene builds: ~10 s cold)
 def test_interpolate_changes_no_byte_where_positions_are_equal():

@@ -74,6 +74,13 @@ def test_odd_config_size_with_mp4_names_the_key(tmp_path):
     ('[[bodies]]\ntype = "chain"\nname = "b"\n[[bodies]]\ntype = "chain"\nname = "b"',
      "bodies: names must be unique"),
     ('name = "e"\n[[emitters]]\nname = "e"\nrate = 5.0', "emitters: names must be unique"),
+    # a key of another soft-body type is refused, naming the key (bodies are a union tagged by type)
+    ('[[bodies]]\ntype = "cloth"\nstrands = 40', "bodies[0].strands: unknown key: strands is a key of a hair body"),
+    ('[[bodies]]\ntype = "chain"\nresolution = [4, 4]', "bodies[0].resolution: unknown key"),
+    ('[[bodies]]\ntype = "jelly"\nresolution = [3, 3, 3]\nsize = [1.0, 1.0, 1.0]\nplane = "xy"',
+     "bodies[0].plane: unknown key: plane is a key of a cloth body, not of a jelly"),
+    ('[[bodies]]\ntype = "blob"', "bodies[0].type: 'blob' is not allowed; expected 'chain', 'hair', "
+     "'cloth', 'jelly' or 'solid'"),
     (f'[[colliders]]\ntype = "plane"\nname = "{"n" * 100_000}"', "colliders[0].name"),
 ])
 def test_config_problems_name_the_key(tmp_path, extra, key):

@@ -38,6 +38,8 @@ def test_shipped_config_validates_against_the_exported_schema(validator, path):
     {"fps": 0},                                        # out of range
     {"solver": {"integrator": "leapfrog"}},            # not one of the names
     {"colliders": [{"type": "plane", "normal": [0, 1]}]},  # a vector of two
+    {"bodies": [{"type": "cloth", "strands": 40}]},     # a key of another body type
+    {"bodies": [{"type": "jelly", "resolution": [4, 4], "size": [1, 1, 1]}]},  # a lattice needs 3
 ])
 def test_schema_refuses_what_the_loader_refuses(validator, change):
     data = dict(read_toml(os.path.join(ROOT, "configs", "sparks.toml")), **change)

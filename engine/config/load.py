@@ -62,23 +62,79 @@ def _key_path(loc) -> str:
     return out or "config"
 
 
-def _model_at(loc) -> typing.Optional[type]:
-    """The model class whose fields live at ``loc`` (for suggesting a key), or None."""
+def _tags(tp) -> dict:
+    """{tag: model} when ``tp`` is a union of models told apart by a literal ``type`` key (the
+    colliders, the bodies), else {}."""
+    if typing.get_origin(tp) is not Union:
+        return {}
+    out = {}
+    for arg in typing.get_args(tp):
+        field = arg.model_fields.get("type") if isinstance(arg, type) and issubclass(arg, BaseModel) else None
+        if field is None or typing.get_origin(field.annotation) is not typing.Literal:
+            return {}
+        out.update((tag, arg) for tag in typing.get_args(field.annotation))
+    return out
+
+
+def _walk(loc):
+    """Follow an error's ``loc`` through the Scene's types. Returns (the key path as the config
+    writes it, the model whose keys live at the end or None, the tagged union crossed last as
+    {tag: model} with the tag taken). Pydantic puts the tag into the location of an error inside
+    a tagged union (``bodies[0].cloth.strands``); the config has no such key, so it is dropped."""
     tp: Any = Scene
+    clean, union, tag = [], {}, None
     for part in loc:
         tp = _unwrap(tp)
+        tags = _tags(tp)
+        if tags and part in tags:
+            union, tag, tp = tags, part, tags[part]
+            continue
+        clean.append(part)
         if isinstance(part, int):
             args = typing.get_args(tp)
             tp = args[0] if args else None
         elif isinstance(tp, type) and issubclass(tp, BaseModel) and part in tp.model_fields:
             tp = tp.model_fields[part].annotation
-        elif typing.get_origin(tp) is Union:  # a tagged union: the part is the tag value
-            tp = next((a for a in typing.get_args(tp) if getattr(a, "__name__", "").lower()
-                       .startswith(str(part))), None)
         else:
-            return None
+            tp = None
     tp = _unwrap(tp)
-    return tp if isinstance(tp, type) and issubclass(tp, BaseModel) else None
+    model = tp if isinstance(tp, type) and issubclass(tp, BaseModel) else _tags(tp) or None
+    return clean, model, (union, tag)
+
+
+def _model_at(loc) -> typing.Optional[type]:
+    """The model class whose fields live at ``loc`` (for suggesting a key), or None."""
+    model = _walk(loc)[1]
+    return model if isinstance(model, type) else None
+
+
+def _or(words) -> str:
+    words = list(words)
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
+
+
+_NOUNS = {"bodies": "body", "colliders": "collider"}
+
+
+def _other_variant(loc, key) -> typing.Optional[str]:
+    """For a key refused inside a tagged union that another variant takes (``strands`` on a
+    cloth), or nearly takes (``strand``): the rest of the line that says so and lists the
+    variant's own keys; else None (the plain unknown-key line)."""
+    clean, _, (union, tag) = _walk(loc)
+    if tag is None or not isinstance(key, str):
+        return None
+    every = list(dict.fromkeys(k for m in union.values() for k in m.model_fields))
+    near = difflib.get_close_matches(key, every, n=1, cutoff=0.8)
+    name = key if key in every else near[0] if near else None
+    if name is None or name in union[tag].model_fields:
+        return None  # no other variant's key: the usual suggestion among this variant's keys
+    takers = [t for t, m in union.items() if name in m.model_fields]
+    common = set.intersection(*(set(m.model_fields) for m in union.values())) | {"type"}
+    own = [k for k in union[tag].model_fields if k not in common]
+    noun = _NOUNS.get(str(clean[0]) if clean else "", "table")
+    head = f": {key_name(key)} is" if name == key else f"; did you mean {name!r}? It is"
+    return (f"{head} a key of a {_or(takers)} {noun}, not of a {tag} "
+            f"({tag}'s own keys: {', '.join(own) if own else 'none'})")
 
 
 def _unwrap(tp):
@@ -109,14 +165,21 @@ def format_errors(err: ValidationError) -> List[str]:
     return lines
 
 
+def _expected(loc) -> str:
+    """The tags the tagged union at ``loc`` takes, as 'a', 'b' or 'c'."""
+    tags = _walk(loc)[1]
+    return _or(map(repr, tags)) if isinstance(tags, dict) and tags else "a type"
+
+
 def _format_error(e) -> str:
     loc = list(e["loc"])
-    # drop the tag pydantic inserts for the collider union: colliders[0].sphere.radius
-    clean = [p for i, p in enumerate(loc)
-             if not (i == 2 and loc[0] == "colliders" and p in ("plane", "sphere"))]
+    clean, _, _ = _walk(loc)  # without the tag of a union: colliders[0].radius, bodies[0].strands
     path = _key_path(clean)
     kind, msg = e["type"], e["msg"]
     if kind == "extra_forbidden":
+        other = _other_variant(loc[:-1], loc[-1])
+        if other:
+            return f"{path}: unknown key{other}"
         parent = _model_at([p for p in loc[:-1]])
         names = list(parent.model_fields) if parent else []
         near = difflib.get_close_matches(str(loc[-1]), names, n=1, cutoff=0.5)
@@ -128,11 +191,11 @@ def _format_error(e) -> str:
     elif kind == "missing":
         return f"{path}: required key is missing"
     elif kind == "union_tag_not_found":
-        return f"{path}.type: required key is missing; expected 'plane' or 'sphere'"
+        return f"{path}.type: required key is missing; expected {_expected(loc)}"
     elif kind == "union_tag_invalid":
         given = e.get("input")
         given = given.get("type") if isinstance(given, dict) else given
-        return f"{path}.type: {_short(given)} is not allowed; expected 'plane' or 'sphere'"
+        return f"{path}.type: {_short(given)} is not allowed; expected {_expected(loc)}"
     else:
         return f"{path}: {_short(e.get('input'))} is not allowed: {msg[:1].lower() + msg[1:]}"
 
