@@ -33,7 +33,7 @@ from .builder import ConfigBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
 from .particles.capacity import MAX_POOL
 from .clock import FixedTimestep
-from .config import ConfigError, load_config
+from .config import ConfigError, config_data, load_config
 from .contacts import Contacts
 from .render.camera import Camera
 from .scene import Scene
@@ -97,7 +97,7 @@ class ParticleScene(RigidAPI):
             _shallow(f"{where}: config", config)
             data = checks.plain(copy.deepcopy(config))
         elif hasattr(config, "model_dump"):
-            data = config.model_dump(exclude_none=True)
+            data = config_data(config)
         else:
             raise TypeError(f"{where}: config: {checks.show(config)} is not a config dict or a validated config")
         self._finalizer, self._token, self.scene = None, None, None

@@ -60,3 +60,14 @@ def test_schema_command_prints_the_schema():
                        cwd=ROOT, timeout=120)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["title"] == json_schema()["title"]
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=os.path.basename)
+def test_a_validated_config_round_trips_through_its_data(path):
+    # ParticleScene(validated_config) re-validates config_data(cfg): the keys given, not every
+    # default (every default written out once made sand, water and galaxy refuse their own
+    # interact table: friction "given" to a fluid)
+    from engine.config import config_data, load_config
+
+    cfg = load_config(path)
+    assert load_config(config_data(cfg)) == cfg

@@ -1,5 +1,5 @@
 """Scene configs: strict schema (``schema``) and loading with one-line errors (``load``)."""
-from .load import ConfigError, load_config, read_toml, validate
+from .load import ConfigError, config_data, load_config, read_toml, validate
 from .schema import INTEGRATORS, Emitter, Scene
 
-__all__ = ["ConfigError", "load_config", "read_toml", "validate", "Scene", "Emitter", "INTEGRATORS"]
+__all__ = ["ConfigError", "config_data", "load_config", "read_toml", "validate", "Scene", "Emitter", "INTEGRATORS"]

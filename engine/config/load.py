@@ -294,6 +294,13 @@ def check_depth(data, where: str = "config") -> None:
             todo += [(v, depth + 1) for v in node]
 
 
+def config_data(cfg: Scene) -> dict:
+    """The plain data of a validated config that validates back to an equal one: the keys the
+    config gave (or a preset set), not every default — a check such as an ``interact`` key that
+    applies to one kind only reads which keys were given."""
+    return cfg.model_dump(exclude_none=True, exclude_unset=True)
+
+
 def load_config(path_or_dict, overrides: typing.Optional[dict] = None) -> Scene:
     """A validated :class:`Scene` from a TOML path or a dict; ``overrides`` are dotted keys
     (``{"solver.integrator": "rk4", "render.width": 320}``) applied before validation."""
