@@ -427,7 +427,8 @@ class ParticleScene(RigidAPI):
 
     def energy(self) -> dict:
         """Per soft body: kinetic, gravitational and every energy term by name (spring, bending,
-        area, volume, the solid's material, user energies) and their total (J)."""
+        area, volume, the solid's material, user energies) and their total (J). Particles'
+        external potentials report in :meth:`potential_energy`."""
         return {b.cfg.name or f"body{k}": b.energy() for k, b in enumerate(self._live("energy").bodies)}
 
     def contacts(self, min_speed: float = 0.0, body: str | None = None) -> Contacts:

@@ -142,6 +142,20 @@ def test_terrain_potential_is_gravity_on_its_emitters_only(adaptive):
         assert s.scene.stats.h_max <= H * (1 + 1e-12)
 
 
+def test_a_potential_on_all_emitters_acts_on_one_added_in_place():
+    s = scene(("rock", (0.0, 2.0, 0.0), 1))
+    s.add_potential(terrain, [9.81], name="ground")
+    s.step(H)
+    s.add_emitter(dict(name="late", shape="point", position=[1.0, 2.0, 0.0], speed=[0.0, 0.0], lifetime=100.0,
+                       bursts=[{"time": 0.0, "count": 1}]))
+    assert s.last_add is None  # written into a spare row: nothing rebuilt or compiled
+    for _ in range(10):
+        s.step(H)
+    p = s.particles()
+    late = p["position"][p["emitter"] == 1]
+    assert len(late) == 1 and late[0, 1] < 2.0 - 0.5 * 9.81 * (9 * H) ** 2
+
+
 def test_a_rejected_adaptive_attempt_leaves_no_kick():
     """attempt() kicks the velocities by −(h/2)∇U; rollback() must restore them byte for byte."""
     s = scene(integrator="rk4", adaptive=True)

@@ -185,7 +185,8 @@ class ParticlePotential:
         """(N, 3) float64 ∇U at the (N, 3) positions ``x`` (N <= capacity), by the kick's own
         kernels: for tests against closed forms."""
         x = np.asarray(x, np.float64).reshape(-1, 3)
-        assert len(x) <= self.cap
+        if len(x) > self.cap:
+            raise ValueError(f"gradient: x: {len(x)} points, at most the pool's {self.cap}")
         buf = np.zeros((max(1, self.cap), 3), np.float32)
         buf[: len(x)] = x
         self.xe.from_numpy(buf)
