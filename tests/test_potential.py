@@ -156,6 +156,22 @@ def test_a_potential_on_all_emitters_acts_on_one_added_in_place():
     assert len(late) == 1 and late[0, 1] < 2.0 - 0.5 * 9.81 * (9 * H) ** 2
 
 
+def test_a_terrain_potential_rests_particles_on_a_floor():
+    """Pulled onto a floor by U = g·y: held on it, never through; at rest the velocity keeps
+    the last half kick, at most h·g/2 into the floor (the kicks do not see the contact)."""
+    b = SceneBuilder(seed=1, fps=60).forces(gravity=[0.0, 0.0, 0.0]).solver(h=H)
+    b.emitter(name="rock", shape="point", position=[0.0, 0.3, 0.0], speed=[0.0, 0.0], lifetime=100.0,
+              bursts=[{"time": 0.0, "count": 1}])
+    b.collider(type="plane", name="floor", point=[0.0, 0.0, 0.0], normal=[0.0, 1.0, 0.0], restitution=0.3)
+    s = b.build(render=False)
+    s.add_potential(terrain, [9.81], name="ground")
+    for _ in range(120):
+        s.step(1 / 60)
+        assert s.particles()["position"][0, 1] >= 0.0
+    p = s.particles()
+    assert p["position"][0, 1] < 1e-3 and -H * 9.81 / 2 * (1 + 1e-5) <= p["velocity"][0, 1] <= 0.0
+
+
 def test_a_rejected_adaptive_attempt_leaves_no_kick():
     """attempt() kicks the velocities by −(h/2)∇U; rollback() must restore them byte for byte."""
     s = scene(integrator="rk4", adaptive=True)
