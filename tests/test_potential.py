@@ -242,6 +242,20 @@ def test_potentials_carry_over_a_rebuild_and_go_with_their_emitters():
     assert list(s.potential_energy()) == ["well"]
 
 
+def test_a_reused_scene_does_not_keep_the_previous_owners_potentials():
+    from engine import reuse
+
+    s = scene(("solo", (0.5, 1.0, 0.0), 1))
+    s.add_potential(well, [K], name="well")
+    built = s.scene
+    s.close()
+    s = scene(("solo", (0.5, 1.0, 0.0), 1))
+    assert s.scene is built and reuse.counts["reused"] >= 1
+    assert s.potential_energy() == {} and s.scene.particles.potentials == []
+    s.step(H)
+    assert np.all(s.particles()["velocity"] == 0)  # nothing pulls it
+
+
 PROBE = """
 import hashlib, sys
 sys.path[:0] = ["."]
