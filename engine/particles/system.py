@@ -182,6 +182,7 @@ class ParticleSystem(SystemBase):
             import taichi as ti
 
             self._vel_kept = ti.Vector.field(3, ti.f32, max(1, self.layout.capacity))
+            _save(self.state.particle_vel, self._vel_kept, 0)  # compiled now, not at the first step
         pot = ParticlePotential(potential, params, rows, self.state, self.integrator.nonfinite_t, name)
         pot.compile()
         self.potentials.append(pot)
