@@ -16,12 +16,13 @@ import numpy as np
 
 from ..contacts import Contacts
 from ..system import SystemBase
-from ..ode.driver import Driver, StepPolicy
+from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import METHODS
 from . import integrate
 from .emitters import Emitters
 from .forces import Forces
 from .integrate import NO_FAILURE, ParticleIntegrator
+from .potential import POST, PRE, _save
 from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout, pool_sizes
 from .slots import clear as clear_pool
 from .slots import save_positions
@@ -75,12 +76,29 @@ class ParticleSystem(SystemBase):
             max_steps_hint="raise solver.tolerance or solver.max_steps_per_frame"), stats)
         self._alive = None  # the live count, read back when first asked after an advance
         self._held = None  # ((t0, h, step), plan): births due at a step a fused run stopped before
+        # external potentials (engine.particles.potential), added from the API; none: nothing of
+        # them is allocated or compiled and every step is launched exactly as before
+        self.potentials: list = []
+        self._h_max = self.driver.policy.h_max
+        self._vel_kept = None  # velocities before an adaptive attempt's first kick (rollback)
 
     def advance(self, t0: float, t1: float) -> None:
         """Advance from t0 to exactly t1 (the System protocol, engine.scene.system). Contact
         records accumulate until :meth:`contacts` drains them."""
         self._alive = None
-        self.driver.advance(t0, t1)
+        if not self.potentials:
+            self.driver.advance(t0, t1)
+            return
+        try:
+            self.driver.advance(t0, t1)
+        except SimulationDiverged as e:
+            bad = [(t, p.name) for p in self.potentials if (t := p.failed_at()) is not None]
+            if not bad:
+                raise
+            t, name = min(bad)
+            raise SimulationDiverged(self.label, self.method, e.h, t,
+                                     f"potential {name!r} (add_potential) has a non-finite gradient at a "
+                                     f"particle's position (the particle was removed)") from None
 
     # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
     def _move_colliders(self, t: float, t_end: float) -> bool:
@@ -98,7 +116,9 @@ class ParticleSystem(SystemBase):
         held, self._held = self._held, None
         self.emitters.spawn(held[1] if held is not None and held[0] == (t0, h, j) else self.emitters.plan(t, h))
         k = 1
-        if not self._move_colliders(t, t + h) and not self.emitters.uses_events and self.interact is None:
+        # (with a potential every step is its own launch between two half kicks: no fused runs)
+        if not self._move_colliders(t, t + h) and not self.emitters.uses_events and self.interact is None \
+                and not self.potentials:
             while j + k < min(n, j + MAX_RUN):
                 due = self.emitters.plan(t0 + (j + k) * h, h)
                 if due is not None:
@@ -106,12 +126,14 @@ class ParticleSystem(SystemBase):
                     break
                 k += 1
         if self.layout.capacity:
+            self._kick(t, h, PRE)
             if k == 1:
                 integrate.step_fixed(self.integrator, t, h)
             else:
                 integrate.step_fixed_run(self.integrator, t0, h, j, k)
             if self.interact is not None:  # (k == 1: interacting particles take no fused runs)
                 self.interact.step(h)
+            self._kick(t + h, h, POST)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t0 + (j + k) * h)
         return k
@@ -121,6 +143,9 @@ class ParticleSystem(SystemBase):
         self._move_colliders(t, t + h)
         if not self.layout.capacity:
             return 0.0
+        if self.potentials:  # the first half kick goes into the velocities: kept to undo it
+            _save(self.state.particle_vel, self._vel_kept, self.layout.capacity)
+            self._kick(t, h, PRE)
         return float(integrate.attempt(self.integrator, t, h, self.atol, self.rtol, self.tol_g))
 
     def commit(self, t: float, h: float) -> None:
@@ -128,11 +153,52 @@ class ParticleSystem(SystemBase):
             integrate.commit(self.integrator, t, h)
             if self.interact is not None:
                 self.interact.step(h)
+            self._kick(t + h, h, POST)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t + h)
 
     def rollback(self) -> None:
-        pass  # the trial sits in cand_pos / cand_vel until committed
+        # the trial sits in cand_pos / cand_vel until committed; a rejected attempt's first half
+        # kick is undone (the retry kicks again with its own h)
+        if self.potentials and self.layout.capacity:
+            _save(self._vel_kept, self.state.particle_vel, self.layout.capacity)
+
+    # -- external potentials (engine.particles.potential) -----------------------------------------
+    def _kick(self, t: float, h: float, phase: int) -> None:
+        for p in self.potentials:  # in the order added: a fixed order of additions
+            p.half_kick(t, h, phase)
+
+    def add_potential(self, potential, params, emitter_rows, name: str) -> None:
+        """Act on the particles of ``emitter_rows`` (indices; None: every row, spare ones too)
+        with ``potential`` (a checked ``ti.func``) and ``params`` (checked (P,) floats). Its
+        kernels are compiled here; one Taichi cannot compile raises and nothing is added."""
+        from .potential import ParticlePotential
+
+        rows = np.ones(self.emitters.count, np.int32)
+        if emitter_rows is not None:
+            rows[:] = 0
+            rows[list(emitter_rows)] = 1
+        if self.adaptive and self._vel_kept is None:
+            import taichi as ti
+
+            self._vel_kept = ti.Vector.field(3, ti.f32, max(1, self.layout.capacity))
+            _save(self.state.particle_vel, self._vel_kept, 0)  # compiled now, not at the first step
+        pot = ParticlePotential(potential, params, rows, self.state, self.integrator.nonfinite_t, name)
+        pot.compile()
+        self.potentials.append(pot)
+        # step doubling estimates the inner step's error only, not the splitting's: an adaptive
+        # step never grows past the configured h while a potential acts (as with interactions)
+        self.driver.policy.h_max = min(self._h_max, self.cfg.solver.h)
+
+    def clear_potentials(self) -> None:
+        """Drop every potential (their fields stay allocated, unused): steps as built."""
+        self.potentials = []
+        self.driver.policy.h_max = self._h_max
+
+    def energy(self) -> dict:
+        """{potential name: Σ U(x_i) over the particles it acts on (J/kg, unit masses)}; {}
+        without potentials."""
+        return {p.name: p.energy() for p in self.potentials}
 
     def first_nonfinite(self):
         f = self.integrator.nonfinite_t
@@ -187,6 +253,8 @@ class ParticleSystem(SystemBase):
         I.nonfinite_t[None] = NO_FAILURE
         I.contact_log.count[None] = 0
         I.hits[None] = 0
+        for p in self.potentials:  # (kept: the API drops them from a scene it takes for reuse)
+            p.bad_t[None] = 1e30
         self.driver.reset()
         self._alive, self._held = None, None
 
