@@ -145,16 +145,7 @@ class ParticlePotential:
                         ti.atomic_min(g.nonfinite_t[None], t)
                         S.particle_alive[i] = 0
 
-        @ti.kernel
-        def total() -> ti.f64:
-            s = ti.cast(0, ti.f64)
-            ti.loop_config(serialize=True)  # a fixed order: the same total on any thread count
-            for i in range(cap):
-                if g.kick_dt[i] > 0:
-                    s += ti.cast(g.u[i], ti.f64)
-            return s
-
-        self._gather, self._values, self._kick, self._total = gather, values, kick, total
+        self._gather, self._values, self._kick = gather, values, kick
 
     def compile(self) -> None:
         """Compile the kick's kernels now (acting on nobody: ``rows`` zeroed for the launch), so
@@ -179,7 +170,10 @@ class ParticlePotential:
         """Σ U(x_i) over the born particles it acts on (J/kg: each particle of unit mass)."""
         self._gather(0.0, REPORT)
         self._values()
-        return float(self._total())
+        # summed on the host in slot order (f64): the same total on any thread count, and no
+        # serial kernel (a diagnostic, never part of a frame)
+        on = self.kick_dt.to_numpy() > 0
+        return float(np.sum(self.u.to_numpy()[on].astype(np.float64)))
 
     def gradient(self, x) -> np.ndarray:
         """(N, 3) float64 ∇U at the (N, 3) positions ``x`` (N <= capacity), by the kick's own
