@@ -5,7 +5,7 @@ reverse-mode autodiff, applied as half kicks around each particle step (PHYSICS.
 Determinism (as engine.forces.user): the differentiated kernel reads only a per-particle copy
 ``xe[i]`` of the particle's position, so the adjoint ``xe.grad[i]`` has one writer, particle i's
 own thread (Taichi turns the read into an atomic add, but with a single contributor the sum is
-exact). The per-particle values ``u[i]`` are not state; the reported total is summed serially in
+exact). The per-particle values ``u[i]`` are not state; the reported total is summed on the host in
 f64. Nothing reaches the particle state through a float atomic, so frames are byte-identical
 for any thread count.
 
