@@ -1,5 +1,11 @@
-"""Small builders shared by tests: minimal valid scene dicts."""
+"""Small builders shared by tests: minimal valid scene dicts, and a probe run on 1 and 2 threads."""
 import copy
+import os
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 BASE = {
     "seed": 1,
@@ -30,3 +36,23 @@ def quick(values, keep):
     import pytest
 
     return [v if v in keep else pytest.param(v, marks=pytest.mark.slow) for v in values]
+
+
+def on_thread_counts(source: str, *args, counts=(1, 2), timeout: float = 600):
+    """Run the Python ``source`` in a fresh process once per CPU thread count (``sys.argv[1]``,
+    then ``args``), in the checkout with it on the path; returns each run's stdout split into
+    words. A run that fails fails the test with its stderr's tail (a fresh process per count:
+    Taichi's thread count is fixed at ``ti.init``). The source runs from a file, not ``-c``:
+    Taichi reads a ``ti.func``'s source from its file."""
+    env = dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=ROOT)
+    out = []
+    with tempfile.TemporaryDirectory() as d:
+        script = os.path.join(d, "probe.py")
+        with open(script, "w") as fh:
+            fh.write(source)
+        for n in counts:
+            r = subprocess.run([sys.executable, script, str(n), *map(str, args)], cwd=ROOT, env=env,
+                               capture_output=True, text=True, timeout=timeout)
+            assert r.returncode == 0, r.stderr[-2000:]
+            out.append(r.stdout.split())
+    return out

@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from helpers import quick
+from helpers import on_thread_counts, quick
 from behaviour_scenes import FRAME_SHOTS, adaptive_cloth, adaptive_particles, fixed_cloths, particle_frames
 
 HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "behaviour")
@@ -87,19 +87,10 @@ print(h.hexdigest(), *s.particles.emitters.emitted_counts())
 
 
 @pytest.mark.slow  # (the default run checks campfire's sub-emitters at 1 vs 2 threads in test_render.py)
-def test_sub_emitters_give_the_same_bytes_with_one_and_two_threads(tmp_path):
+def test_sub_emitters_give_the_same_bytes_with_one_and_two_threads():
     """Children take slots from a chunked prefix sum over the parents (several slices here):
     the pool is byte-identical for any thread count."""
-    import subprocess
-    import sys
-
-    script = tmp_path / "probe.py"
-    script.write_text(PROBE)
-    root = os.path.dirname(os.path.dirname(HERE))  # the checkout (HERE is tests/behaviour)
-    runs = [subprocess.run([sys.executable, str(script), str(n)], cwd=root, capture_output=True, text=True)
-            for n in (1, 2)]
-    assert all(r.returncode == 0 for r in runs), [r.stderr[-1500:] for r in runs]
-    out = [r.stdout.split() for r in runs]
+    out = on_thread_counts(PROBE)
     assert out[0] == out[1], out
     emitted = [int(v) for v in out[0][1:]]
     assert emitted[0] > 1000 and emitted[1] > 1000 and emitted[2] > 0, emitted  # parents, children, grandchildren

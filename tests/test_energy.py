@@ -4,11 +4,11 @@ force, user-energy refusals, bad config input, no new compile without terms; slo
 strain of a cube, bounded energy with the symplectic methods, byte-identical frames on 1 and 2
 threads, the energy configs end to end. Closed forms: ../shared/PHYSICS.md, "Energy-based models"."""
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+
+from helpers import on_thread_counts
 import taichi as ti
 
 from engine.runtime import ensure_init
@@ -19,7 +19,7 @@ from engine.colliders import Colliders, ColliderSpec  # noqa: E402
 from engine.config import load_config  # noqa: E402
 from engine.forces import elements as el  # noqa: E402
 from engine.forces.elements import ElementGroup  # noqa: E402
-from engine.forces.terms import hooke_energy, lame  # noqa: E402
+from engine.forces.terms import lame  # noqa: E402
 from engine.forces.user import UserEnergy  # noqa: E402
 from engine.springs import SpringSystem, chain, cloth, solid  # noqa: E402
 from engine.springs.topology import hinges  # noqa: E402
@@ -273,13 +273,9 @@ print(hashlib.sha256(s.bodies[0].positions().tobytes()).hexdigest())
 
 
 @pytest.mark.slow
-def test_solid_frames_are_byte_identical_on_one_and_two_threads(tmp_path):
-    script = tmp_path / "probe.py"
-    script.write_text(PROBE)
-    runs = [subprocess.run([sys.executable, str(script), str(n)], cwd=ROOT, capture_output=True, text=True)
-            for n in (1, 2)]
-    assert all(r.returncode == 0 for r in runs), [r.stderr[-1500:] for r in runs]
-    assert runs[0].stdout.split()[-1] == runs[1].stdout.split()[-1]
+def test_solid_frames_are_byte_identical_on_one_and_two_threads():
+    out = on_thread_counts(PROBE)
+    assert out[0][-1] == out[1][-1]
 
 
 @pytest.mark.slow

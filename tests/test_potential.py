@@ -6,17 +6,16 @@ Verlet's discrete frequency is ω̃ = (2/h) arcsin(ωh/2) and it conserves I = v
 exactly, so E = ½v² + U swings between E₀(1 − (ωh/2)²) (at x = c) and E₀ (at rest): bounded, no
 drift. On U = g·y Verlet is exact: y = y₀ − g t²/2 to f32 rounding.
 """
-import hashlib
 import math
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+
+from helpers import on_thread_counts
 import taichi as ti
 
-from engine.api import ParticleScene, SceneBuilder
+from engine.api import SceneBuilder
 from engine.scene import SimulationDiverged
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -278,11 +277,6 @@ print(len(p["position"]), hashlib.sha256(p["position"].tobytes() + p["velocity"]
 """
 
 
-def test_frames_with_a_potential_are_byte_identical_on_one_and_two_threads(tmp_path):
-    script = tmp_path / "probe.py"
-    script.write_text(PROBE)
-    runs = [subprocess.run([sys.executable, str(script), str(n)], cwd=ROOT, capture_output=True, text=True)
-            for n in (1, 2)]
-    assert all(r.returncode == 0 for r in runs), [r.stderr[-1500:] for r in runs]
-    out = [r.stdout.split()[-2:] for r in runs]
+def test_frames_with_a_potential_are_byte_identical_on_one_and_two_threads():
+    out = [words[-2:] for words in on_thread_counts(PROBE)]
     assert int(out[0][0]) > 100 and out[0] == out[1]

@@ -1,11 +1,11 @@
 """The renderer: two schedules, one image; determinism; sizes, cameras and overlays without
 recompiling; the reduced-resolution layer; what the output array holds."""
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+
+from helpers import on_thread_counts
 
 from engine.api import ParticleScene
 from engine.config import load_config
@@ -64,13 +64,8 @@ print(h.hexdigest())
 
 @pytest.mark.slow
 def test_frames_are_byte_identical_across_thread_counts():
-    env = dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=ROOT)
-    out = [subprocess.run([sys.executable, "-c", _PROBE, str(n)], cwd=ROOT, env=env, text=True,
-                          capture_output=True, timeout=300) for n in (1, 2)]
-    for o in out:
-        assert o.returncode == 0, o.stderr[-2000:]
-    digests = {o.stdout.strip().splitlines()[-1] for o in out}
-    assert len(digests) == 1, digests
+    out = on_thread_counts(_PROBE, timeout=300)
+    assert out[0][-1] == out[1][-1], out
 
 
 def _compiled(renderer):

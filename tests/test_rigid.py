@@ -1,13 +1,12 @@
 """Rigid bodies (issue 22) against the closed forms of ../shared/PHYSICS.md, on both paths (XPBD,
 Müller et al. 2020; Baraff's state on the ODE driver), and their bad input."""
-import hashlib
 import math
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+
+from helpers import on_thread_counts
 from scipy.special import ellipk
 
 from engine.config import ConfigError, load_config
@@ -207,12 +206,8 @@ print(hashlib.sha256(S.x.tobytes() + S.q.tobytes() + S.v.tobytes() + S.w.tobytes
 @pytest.mark.slow  # (default run kept under 5 minutes: the closed forms of the other tests stay in it)
 def test_byte_identical_on_one_and_two_threads():
     cfg = os.path.join(ROOT, "configs", "crates.toml")
-    env = dict(os.environ, PYTHONPATH=ROOT)
-    out = [subprocess.run([sys.executable, "-c", THREADS, str(n), cfg], capture_output=True, text=True, env=env,
-                          timeout=600, cwd=ROOT) for n in (1, 2)]
-    for o in out:
-        assert o.returncode == 0, o.stderr[-2000:]
-    assert out[0].stdout.split()[-1] == out[1].stdout.split()[-1]
+    out = on_thread_counts(THREADS, cfg)
+    assert out[0][-1] == out[1][-1]
 
 
 @pytest.mark.parametrize("body, key", [
