@@ -189,6 +189,42 @@ def test_ode_path_ball_comes_to_rest_on_the_ground():
     assert abs(s.rigid.state.v[0, 1]) < 0.05
 
 
+@pytest.mark.parametrize("e", [1.0, 0.5, 0.0])
+def test_ode_path_head_on_collision_of_two_balls_matches_newton(e):
+    # two balls in free flight meet head on (ODE path, RK4): momentum is kept and the relative
+    # velocity reverses times e (Newton's law of restitution): v1' = (m1 v1 + m2 v2 + m2 e (v2 − v1))/(m1 + m2)
+    m1, m2, v1, v2 = 2.0, 0.5, 1.5, -2.0
+    s = scene([{"name": "a", "shape": "sphere", "radius": 0.2, "mass": m1, "position": [-0.6, 1.0, 0.0],
+                "velocity": [v1, 0.0, 0.0], "restitution": e},
+               {"name": "b", "shape": "sphere", "radius": 0.2, "mass": m2, "position": [0.6, 1.0, 0.0],
+                "velocity": [v2, 0.0, 0.0], "restitution": e}],
+              colliders=(), gravity=(0.0, 0.0, 0.0), integrator="rk4", solver_h=1 / 600)
+    run(s, 0.5)
+    v = s.rigid.state.v[:, 0]
+    w1 = (m1 * v1 + m2 * v2 + m2 * e * (v2 - v1)) / (m1 + m2)
+    w2 = (m1 * v1 + m2 * v2 + m1 * e * (v1 - v2)) / (m1 + m2)
+    assert abs(m1 * v[0] + m2 * v[1] - (m1 * v1 + m2 * v2)) < 1e-12  # momentum, to rounding
+    assert v[0] == pytest.approx(w1, abs=1e-9) and v[1] == pytest.approx(w2, abs=1e-9)
+    assert np.abs(s.rigid.state.v[:, 1:]).max() < 1e-12 and np.abs(s.rigid.state.w).max() < 1e-12
+    x = s.rigid.state.x[:, 0]
+    assert x[1] - x[0] >= 0.4 - 1e-9  # never inside each other
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "symplectic_euler"])
+def test_ode_path_box_lands_and_rests_on_a_fixed_box(integrator):
+    # a box dropped onto a fixed box (ODE path) comes to rest on its top face: no sinking, no jitter
+    s = scene([{"name": "base", "shape": "box", "half_extents": [0.5, 0.25, 0.5], "position": [0.0, 0.25, 0.0],
+                "fixed": True},
+               {"name": "top", "shape": "box", "half_extents": [0.2, 0.2, 0.2], "position": [0.05, 1.2, 0.0],
+                "restitution": 0.3, "friction": 0.5}],
+              integrator=integrator, solver_h=1 / 240)
+    run(s, 2.0)
+    S = s.rigid.state
+    assert abs(S.x[1, 1] - 0.7) < 3e-3, S.x[1]  # its bottom on the base's top face (y = 0.5)
+    assert np.linalg.norm(S.v[1]) < 0.05 and np.linalg.norm(S.w[1]) < 0.2
+    assert np.array_equal(S.x[0], [0.0, 0.25, 0.0])  # the fixed base never moves
+
+
 THREADS = """
 import hashlib, sys
 from engine import runtime

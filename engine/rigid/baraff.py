@@ -11,8 +11,16 @@ normalised after every step.
 Contacts with the scene's planes after each step: the deepest point of a body below a plane is
 put back on it, and if it approaches, Baraff's impulse j = −(1 + e) v_n / (1/M + n·((I⁻¹(r × n)) ×
 r)) with Coulomb friction (a tangential impulse of at most μ j that stops the sliding point at
-most); e = 0 when |v_n| ≤ 2|g|h, so resting contact neither sinks nor jitters. (Body–body
-contacts and impacts located inside the step are the XPBD path's and the issue's remaining work.)"""
+most); e = 0 when |v_n| ≤ 2|g|h, so resting contact neither sinks nor jitters.
+
+Body–body contacts after each step, the same way for two bodies: the broad and narrow phases of
+the XPBD path (:meth:`RigidSystem.pair_contacts`: boxes by separating axes, the other pairs in
+closed form), each penetration taken out along n split by inverse mass (translation only), then
+Baraff's two-body impulse j = −(1 + e) v_rel·n / (k_a + k_b), k = 1/M + n·((I⁻¹(r × n)) × r), with
+Coulomb friction, swept over the contacts in their fixed order (sequential impulses: a stack needs
+several sweeps, CONTACT_SWEEPS). Impacts are not located inside the step (the particles' are).
+e is the larger of the two bodies' restitutions and μ the mean of their frictions, as on the XPBD
+path."""
 # (no __future__ annotations: Taichi reads the funcs' annotations)
 
 import numpy as np
@@ -25,6 +33,8 @@ from . import collide, quat
 from .quat import cross
 
 N = 14
+MARGIN = 0.005  # m: body–body contacts this close take impulses (penetrations are moved out)
+CONTACT_SWEEPS = 4  # sequential-impulse sweeps over the body–body contacts after a step
 
 
 class BaraffSystem:
@@ -117,7 +127,8 @@ class BaraffSystem:
     def _contacts(self, h: float) -> None:
         own, m = self.owner, self.model
         planes = [(k, s) for k, s in enumerate(own.specs) if s.kind == "plane"]
-        if not planes or m.count == 0:
+        pairs = m.count > 1 and m.dynamic.any()
+        if not (planes or pairs) or m.count == 0:
             return
         Y = self.Y.to_numpy()
         y = Y[: m.count]
@@ -141,35 +152,71 @@ class BaraffSystem:
                 y[i, 0:3] += d * n  # back onto the plane
                 pa = pa + d * n
                 self._impulse(y, i, pa, n, float(spec.restitution), 0.5 * (m.body_friction[i] + spec.friction), gl, h)
+        if pairs:
+            changed |= self._pair_contacts(y, gl, h)
         if changed:
             y[:, 3:7] = quat.normalize(y[:, 3:7])
             self.Y.from_numpy(Y)
 
-    def _impulse(self, y, i, p, n, e, mu, gl, h) -> None:
+    def _pair_contacts(self, y, gl, h) -> bool:
+        """Body–body contacts of the bodies as ``y`` (B, 14) holds them: penetrations taken out,
+        then CONTACT_SWEEPS sweeps of two-body impulses (module docstring). Whether any."""
+        own, m = self.owner, self.model
+        R = quat.matrix(y[:, 3:7])
+        # contacts within MARGIN count (a box resting on another keeps all four corners of its
+        # manifold, not the one or two that happen to be inside after a step: those alone would
+        # rock it); only penetrations are moved
+        got = own.pair_contacts(y[:, 0:3], R, np.full(m.count, 0.5 * MARGIN), m.dynamic)
+        if got is None:
+            return False
+        a, b, pa, pb, n = got
+        depth = np.einsum("ij,ij->i", pb - pa, n)
+        wa, wb = m.body_inv_mass[a], m.body_inv_mass[b]
+        for k in range(len(a)):  # out of each other along n, split by inverse mass
+            w = wa[k] + wb[k]
+            if w > 0.0 and depth[k] > 0.0:
+                y[a[k], 0:3] += depth[k] * (wa[k] / w) * n[k]
+                y[b[k], 0:3] -= depth[k] * (wb[k] / w) * n[k]
+        p = 0.5 * (pa + pb)  # the contact point, midway between the two surfaces
+        e = np.maximum(m.body_restitution[a], m.body_restitution[b])
+        mu = 0.5 * (m.body_friction[a] + m.body_friction[b])
+        for _ in range(CONTACT_SWEEPS):
+            for k in range(len(a)):
+                self._impulse(y, a[k], p[k], n[k], float(e[k]), float(mu[k]), gl, h, other=int(b[k]))
+        return True
+
+    def _impulse(self, y, i, p, n, e, mu, gl, h, other: int = -1) -> None:
+        """Baraff's impulse at the contact point p (normal n toward body i) between body i and
+        ``other`` (−1: the world, at rest), with Coulomb friction (at most μj, and no more than
+        stops the sliding); e = 0 for an approach slower than 2|g|h (resting contact)."""
         m = self.model
-        q = y[i, 3:7]
-        r = p - y[i, 0:3]
-        inv_m = m.body_inv_mass[i]
-        Iinv = lambda v: quat.rotate(q, m.body_inv_inertia[i] * quat.rotate_inv(q, v))
-        v = y[i, 7:10] * inv_m
-        w = Iinv(y[i, 10:13])
-        vp = v + cross(w, r)
+        bodies = (i,) if other < 0 else (i, other)
+        r, Iinv, vp, k_of = {}, {}, np.zeros(3), []
+        for s, c in zip(bodies, (1.0, -1.0)):
+            r[s] = p - y[s, 0:3]
+            Iinv[s] = (lambda q_, s_: lambda v: quat.rotate(q_, m.body_inv_inertia[s_] * quat.rotate_inv(q_, v)))(y[s, 3:7], s)
+            w = Iinv[s](y[s, 10:13])
+            vp = vp + c * (y[s, 7:10] * m.body_inv_mass[s] + cross(w, r[s]))
         vn = float(np.dot(vp, n))
         if vn >= 0.0:
             return
         if -vn <= 2.0 * gl * h:
             e = 0.0  # resting: no bounce
-        k_n = inv_m + float(np.dot(n, cross(Iinv(cross(r, n)), r)))
-        j = -(1.0 + e) * vn / k_n
+
+        def k_along(d):  # 1/M + d·((I⁻¹(r × d)) × r), summed over the bodies
+            return sum(m.body_inv_mass[s] + float(np.dot(d, cross(Iinv[s](cross(r[s], d)), r[s]))) for s in bodies)
+
+        j = -(1.0 + e) * vn / k_along(n)
         J = j * n
         vt = vp - vn * n
         vt_len = float(np.linalg.norm(vt))
         if vt_len > 1e-12:
             t = vt / vt_len
-            k_t = inv_m + float(np.dot(t, cross(Iinv(cross(r, t)), r)))
-            J = J - min(mu * j, vt_len / k_t) * t
-        y[i, 7:10] += J
-        y[i, 10:13] += cross(r, J)
+            J = J - min(mu * j, vt_len / k_along(t)) * t
+        for s, c in zip(bodies, (1.0, -1.0)):
+            if m.body_inv_mass[s] > 0.0:  # a fixed body takes no impulse
+                y[s, 7:10] += c * J
+                y[s, 10:13] += c * cross(r[s], J)
 
 
 def _pad(a, n):

@@ -181,28 +181,9 @@ class RigidSystem(SystemBase):
             K = len(a)
             blocks.append((a, np.full(K, -1 - k), pa, pb, n, np.full(K, float(spec.friction)),
                            np.full(K, float(spec.restitution))))
-        pairs = collide.broad_phase(S.x, m.body_bound, margins)
-        if len(pairs):
-            keep = moving[pairs[:, 0]] | moving[pairs[:, 1]]
-            if self.joints is not None:
-                keep &= np.array([not self._jointed(i, j) for i, j in pairs], bool)
-            pairs = pairs[keep]
-        if len(pairs):
-            boxes = (m.body_shape[pairs[:, 0]] == BOX) & (m.body_shape[pairs[:, 1]] == BOX)
-            bb = pairs[boxes]
-            k, pa, pb, n = collide.box_box_batch(
-                S.x[bb[:, 0]], R[bb[:, 0]], m.body_half[bb[:, 0]], S.x[bb[:, 1]], R[bb[:, 1]], m.body_half[bb[:, 1]],
-                margins[bb[:, 0]] + margins[bb[:, 1]])
-            found = [(np.flatnonzero(boxes)[k], pa, pb, n)]
-            for q in np.flatnonzero(~boxes):  # other shape pairs: one at a time
-                i, j = pairs[q]
-                gi = (m.body_radius[i], m.body_half[i], m.body_half_length[i])
-                gj = (m.body_radius[j], m.body_half[j], m.body_half_length[j])
-                got = collide.pair(m.body_shape[i], m.body_shape[j], S.x[i], R[i], S.x[j], R[j], gi, gj,
-                                   margins[i] + margins[j])
-                found += [(np.full(1, q), ca[None], cb[None], cn[None]) for ca, cb, cn in got]
-            q, pa, pb, n = collide._blocks(found)
-            i, j = pairs[q, 0], pairs[q, 1]
+        got = self.pair_contacts(S.x, R, margins, moving)
+        if got is not None:
+            i, j, pa, pb, n = got
             blocks.append((i, j, pa, pb, n, m.body_friction[j], m.body_restitution[j]))
         cols = [np.concatenate([b[c] for b in blocks]) if blocks else None for c in range(7)]
         if not blocks:
@@ -210,6 +191,37 @@ class RigidSystem(SystemBase):
                     np.zeros((0, 3)), np.zeros(0), np.zeros(0)]
         self._wake(cols[0], cols[1])
         return ContactSet(m, S, *cols, statics=[s.name or f"colliders[{k}]" for k, s in enumerate(self.specs)])
+
+    def pair_contacts(self, x, R, margins, moving):
+        """Body–body contacts of bodies at ``x`` (B, 3) turned by ``R`` (B, 3, 3), each grown by
+        its margin (B,), for pairs with a ``moving`` body (B,) bool, jointed pairs left out: arrays
+        (a, b, p_a, p_b, n) (n from b to a), in a fixed order (pair by pair from the broad phase,
+        then point); None when there is none. Boxes against boxes by separating axes in one
+        batch, other shape pairs one at a time (engine.rigid.collide)."""
+        m = self.model
+        pairs = collide.broad_phase(x, m.body_bound, margins)
+        if len(pairs):
+            keep = moving[pairs[:, 0]] | moving[pairs[:, 1]]
+            if self.joints is not None:
+                keep &= np.array([not self._jointed(i, j) for i, j in pairs], bool)
+            pairs = pairs[keep]
+        if not len(pairs):
+            return None
+        boxes = (m.body_shape[pairs[:, 0]] == BOX) & (m.body_shape[pairs[:, 1]] == BOX)
+        bb = pairs[boxes]
+        k, pa, pb, n = collide.box_box_batch(
+            x[bb[:, 0]], R[bb[:, 0]], m.body_half[bb[:, 0]], x[bb[:, 1]], R[bb[:, 1]], m.body_half[bb[:, 1]],
+            margins[bb[:, 0]] + margins[bb[:, 1]])
+        found = [(np.flatnonzero(boxes)[k], pa, pb, n)]
+        for q in np.flatnonzero(~boxes):  # other shape pairs: one at a time
+            i, j = pairs[q]
+            gi = (m.body_radius[i], m.body_half[i], m.body_half_length[i])
+            gj = (m.body_radius[j], m.body_half[j], m.body_half_length[j])
+            got = collide.pair(m.body_shape[i], m.body_shape[j], x[i], R[i], x[j], R[j], gi, gj,
+                               margins[i] + margins[j])
+            found += [(np.full(1, q), ca[None], cb[None], cn[None]) for ca, cb, cn in got]
+        q, pa, pb, n = collide._blocks(found)
+        return pairs[q, 0], pairs[q, 1], pa, pb, n
 
     def _jointed(self, i, j) -> bool:
         if not hasattr(self, "_joint_pairs"):
