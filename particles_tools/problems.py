@@ -199,6 +199,44 @@ DAMPED_SPRING = Problem(
     invariant=lambda y: 0.5 * _DS_M * y[1] ** 2 + 0.5 * _DS_KS * y[0] ** 2,
 )
 
+
+# A torque-free rigid body tumbling near its intermediate axis (the "Dzhanibekov" flip), on
+# Baraff's state as the engine's ODE path steps it (engine.rigid.baraff): q (unit quaternion
+# [w, x, y, z], body to world) and the world angular momentum L, constant with no torque, so
+# q' = ½ [0, ω] ⊗ q with ω = R I⁻¹ Rᵀ L (q normalised inside f, as the engine does). Principal
+# moments I = (1, 2, 3) kg·m², ω₀ = (1/4, 3, 1/4) rad/s in the body frame (= world at t = 0),
+# T = 4 s: one flip (nearer the axis the flip is sharper and errors grow as e^{λt}: at
+# ω₀ = (1/16, 3, 1/16) over 8 s explicit Euler stays O(1) wrong down to h = 5e-4). y = (q | L, 0):
+# the pad makes the halves equal for the partitioned methods (q-half, p-half). Reference: DOP853
+# at rtol 1e-14 (Radau at 1e-13 agrees to 3e-14).
+TUMBLE_I = (1.0, 2.0, 3.0)
+
+
+@ti.func
+def _tumbling(y, t):
+    q = ti.Vector([y[0], y[1], y[2], y[3]])
+    q = q / q.norm()
+    u = ti.Vector([q[1], q[2], q[3]])
+    L = ti.Vector([y[4], y[5], y[6]])
+    tt = 2.0 * (-u).cross(L)  # Rᵀ L: L turned by the conjugate
+    Lb = L + q[0] * tt + (-u).cross(tt)
+    wb = ti.Vector([Lb[0] / TUMBLE_I[0], Lb[1] / TUMBLE_I[1], Lb[2] / TUMBLE_I[2]])
+    t2 = 2.0 * u.cross(wb)  # ω = R ω_body
+    w = wb + q[0] * t2 + u.cross(t2)
+    d = y * 0
+    d[0] = -w.dot(u) * 0.5
+    vq = (q[0] * w + w.cross(u)) * 0.5
+    d[1], d[2], d[3] = vq[0], vq[1], vq[2]
+    return d
+
+
+TUMBLING = Problem(
+    "tumbling", _tumbling, (1.0, 0.0, 0.0, 0.0, 0.25, 6.0, 0.75, 0.0), (0.0, 4.0), second_order=True,
+    reference_end=(0.09410488429671887, -0.7155462015061045, 0.02980081727517916, -0.69155608272317,
+                   0.25, 6.0, 0.75, 0.0),
+    labels=("qw", "qx", "qy", "qz", "Lx", "Ly", "Lz", "pad"),
+)
+
 PROBLEMS = {p.name: p for p in (GROWTH, DECAY, OSCILLATOR, DRAG, DAMPED_SPRING, LOTKA_VOLTERRA,
-                                  KEPLER, KEPLER_06, ARENSTORF)}
+                                  KEPLER, KEPLER_06, ARENSTORF, TUMBLING)}
 assert all(len(p.labels) == len(p.y0) for p in PROBLEMS.values())

@@ -156,3 +156,26 @@ def test_bounce_chart_located_impacts_beat_projected_ones(tmp_path):
         err = lambda m: [r["error"] for r in rows if r["problem"] == prob and r["method"] == m]  # noqa: E731
         assert max(err("rk4 located (scene, f32)")) < 1e-4 < min(err("rk4 projected (scene, f32)")), prob
         assert max(err("rk4+extrap located (f64)")) < 1e-3 and min(err("rk4 located (f64)")) < 1e-6, prob
+
+
+@pytest.mark.slow
+def test_tumbling_body_work_precision_orders_and_mujoco_rows():
+    # issue 22: a torque-free body near its middle axis on Baraff's (q, L): RK4 fourth order,
+    # midpoint second, Euler first; the splittings are first order on it (their drift depends on
+    # q); MuJoCo's RK4 beside it when installed, also fourth order
+    from particles_tools.charts.workprec import work_precision
+
+    rows = work_precision("tumbling", quick=True)
+    slopes = {m: fixed_slope(rows, m) for m in ("euler", "midpoint", "rk4", "symplectic_euler", "verlet")}
+    assert -5.2 < slopes["rk4"] < -3.6 and -2.4 < slopes["midpoint"] < -1.8, slopes
+    assert all(-1.2 < slopes[m] < -0.8 for m in ("euler", "symplectic_euler", "verlet")), slopes
+    tight = [r for r in rows if r["method"] == "rk4+extrap"]
+    assert min(r["error"] for r in tight) < 1e-9
+    mj = [r for r in rows if r["method"] == "mujoco rk4"]
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        assert mj == []
+    else:
+        mj_slope = fixed_slope([dict(r, mode="fixed") for r in mj], "mujoco rk4")
+        assert -4.6 < mj_slope < -3.4, mj_slope

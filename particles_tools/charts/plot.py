@@ -9,9 +9,10 @@ from engine.render.output import replacing
 
 COLORS = {"euler": "tab:red", "midpoint": "tab:orange", "rk4": "tab:blue",
           "rk4+extrap": "tab:cyan", "symplectic_euler": "tab:green", "verlet": "tab:purple",
-          "scipy RK45": "0.45", "scipy DOP853": "black", "rk4 projected": "tab:brown"}
+          "scipy RK45": "0.45", "scipy DOP853": "black", "rk4 projected": "tab:brown",
+          "mujoco rk4": "tab:pink"}
 MODE_STYLE = {"fixed": dict(ls="-", marker="o", ms=4), "adaptive": dict(ls="--", marker="s", ms=4),
-              "scipy": dict(ls=":", marker="^", ms=5)}
+              "scipy": dict(ls=":", marker="^", ms=5), "mujoco": dict(ls="-.", marker="D", ms=5)}
 
 
 def require_matplotlib():
@@ -57,10 +58,10 @@ def work_precision_png(path, rows: List[dict], title: str, refs=()) -> str:
     ``refs``: (label, color, [(nfev, error), ...]) points quoted in NUMERICS.md, drawn as ×."""
     plt = require_matplotlib()
     fig, axes = plt.subplots(1, 2, figsize=(14, 6), sharey=True)
-    order = {"fixed": 0, "adaptive": 1, "scipy": 2}
+    order = {"fixed": 0, "adaptive": 1, "scipy": 2, "mujoco": 3}
     for (mode, method), rs in sorted(_curves(rows).items(), key=lambda kv: order[kv[0][0]]):
         rs = sorted(rs, key=lambda r: r["nfev"])
-        label = f"{method} ({'fixed h' if mode == 'fixed' else 'tol sweep'})"
+        label = f"{method} ({'fixed h' if mode in ('fixed', 'mujoco') else 'tol sweep'})"
         for ax, key in zip(axes, ("nfev", "wall_s")):
             ax.plot([r[key] for r in rs], [r["error"] for r in rs], color=COLORS[method],
                     label=label, **MODE_STYLE[mode])

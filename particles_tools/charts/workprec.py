@@ -15,7 +15,7 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 
 from engine.ode import INTEGRATORS, METHODS, solve
-from ..problems import ARENSTORF, DAMPED_SPRING, DRAG, KEPLER, KEPLER_06, LOTKA_VOLTERRA, Problem
+from ..problems import ARENSTORF, DAMPED_SPRING, DRAG, KEPLER, KEPLER_06, LOTKA_VOLTERRA, TUMBLE_I, TUMBLING, Problem
 
 FIELDS = ["problem", "method", "mode", "h_or_tol", "nfev", "wall_s", "error"]
 FIXED_METHODS = list(INTEGRATORS)
@@ -60,6 +60,20 @@ def _arenstorf_np(t, y):
                      y[1] - 2 * y[2] - nu * y[1] / d1 - _MU * y[1] / d2])
 
 
+def _qrot(q, v):
+    u = q[1:]
+    t = 2.0 * np.cross(u, v)
+    return v + q[0] * t + np.cross(u, t)
+
+
+def _tumbling_np(t, y):
+    q = y[:4] / np.linalg.norm(y[:4])
+    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    w = _qrot(q, _qrot(conj, y[4:7]) / np.array(TUMBLE_I))
+    dq = 0.5 * np.concatenate([[-w @ q[1:]], q[0] * w + np.cross(w, q[1:])])
+    return np.concatenate([dq, np.zeros(4)])
+
+
 @dataclass(frozen=True)
 class Case:
     problem: Problem
@@ -75,12 +89,14 @@ CASES: Dict[str, Case] = {c.problem.name: c for c in (
     Case(KEPLER, _kepler_np, tuple(2 ** k for k in range(6, 20))),
     Case(KEPLER_06, _kepler_np, tuple(2 ** k for k in range(6, 19))),
     Case(ARENSTORF, _arenstorf_np, tuple(2 ** k for k in range(10, 20))),
+    Case(TUMBLING, _tumbling_np, tuple(2 ** k for k in range(5, 17))),
 )}
 QUICK_TOLS = (1e-3, 1e-5, 1e-7, 1e-10)  # the tolerances of NUMERICS.md's table
 FULL_TOLS = tuple(10.0 ** -k for k in range(2, 11))
 
 T_LABEL = {KEPLER.name: "e = 0.9, T = 2π, one period", KEPLER_06.name: "e = 0.6, T = 2π, one period",
-           ARENSTORF.name: "T = 17.065, one period"}
+           ARENSTORF.name: "T = 17.065, one period",
+           TUMBLING.name: "torque-free body near its middle axis, T = 4 s"}
 PERIODIC = (KEPLER.name, KEPLER_06.name, ARENSTORF.name)  # the reference at T is the initial state
 _ref_cache: dict = {}
 
@@ -177,6 +193,42 @@ def work_precision(name: str, quick: bool = False, tols: Optional[tuple] = None)
             rows += _adaptive(case, m, ex, tols, ref, budget, rep)
     for m in SCIPY_METHODS:
         rows += _scipy(case, m, tols, ref, rep)
+    if name == TUMBLING.name:
+        rows += mujoco_tumbling(n_steps, ref, rep)
+    return rows
+
+
+def mujoco_tumbling(n_steps, ref, repeats=3) -> List[dict]:
+    """MuJoCo's RK4 on the same tumbling body (a free joint with the same principal inertia,
+    no gravity), fixed steps over T: its state at T as (q, L_world) against the reference; 4
+    derivative evaluations a step. No rows where ``mujoco`` is not installed (``pip install
+    mujoco``, the ``compare`` extra)."""
+    try:
+        import mujoco
+    except ImportError:
+        return []
+    p = TUMBLING
+    T = p.t_span[1]
+    I = np.array(TUMBLE_I)
+    w0 = np.array(p.y0[4:7]) / I  # body = world at t = 0
+    rows = []
+    for n in n_steps:
+        h = T / n
+        xml = (f'<mujoco><option timestep="{h!r}" integrator="RK4" gravity="0 0 0"/><worldbody><body>'
+               f'<freejoint/><inertial pos="0 0 0" mass="1" diaginertia="{I[0]} {I[1]} {I[2]}"/>'
+               f'</body></worldbody></mujoco>')
+        model = mujoco.MjModel.from_xml_string(xml)
+
+        def run():
+            data = mujoco.MjData(model)
+            data.qvel[3:6] = w0  # a free joint's angular velocity is in the body frame
+            for _ in range(n):
+                mujoco.mj_step(model, data)
+            return data.qpos[3:7].copy(), data.qvel[3:6].copy()
+
+        (q, wb), wall = _timed(run, repeats)
+        y = np.concatenate([q, _qrot(q, I * wb), [0.0]])
+        rows.append(_row(p, "mujoco rk4", "mujoco", h, 4 * n, wall, float(np.abs(y - ref).max())))
     return rows
 
 
