@@ -277,6 +277,7 @@ print(len(p["position"]), hashlib.sha256(p["position"].tobytes() + p["velocity"]
 """
 
 
+@pytest.mark.slow  # (two fresh processes: the default run stays under 5 minutes)
 def test_frames_with_a_potential_are_byte_identical_on_one_and_two_threads():
     out = [words[-2:] for words in on_thread_counts(PROBE)]
     assert int(out[0][0]) > 100 and out[0] == out[1]

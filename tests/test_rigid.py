@@ -276,6 +276,7 @@ def test_bad_joints_are_one_line_naming_the_key(joint, rigid, key):
     assert len(e.value.problems) == 1 and e.value.problems[0].startswith(key), e.value.problems
 
 
+@pytest.mark.slow  # (a 35 s compile: the default run stays under 5 minutes)
 def test_sparks_bounce_off_a_tilted_rigid_box_and_a_capsule_named_as_the_bodies():
     # issue 22, item 5: particles meet every rigid body as a posed, turning shape. Sparks rain on
     # a fixed box tilted 30° about z and a fixed capsule lying along x; no live spark ends a
