@@ -155,6 +155,47 @@ def test_user_energy_refuses_wrong_use():
         u.check_gradient(np.zeros((2, 3)))
 
 
+
+_HEIGHTS = ti.field(ti.f32, 4)  # a height map an energy must not read (no gradient through an index)
+
+
+class _Holder:
+    pos = ti.Vector.field(3, ti.f32, 2)
+
+
+_HOLDER = _Holder()
+
+
+@ti.func
+def _reads_heights(x, p):
+    return x[1, 0] - _HEIGHTS[0]
+
+
+@ti.func
+def _calls_a_reader(x, p):
+    return _reads_heights(x, p) * 2.0
+
+
+@ti.func
+def _reads_neighbour(x, p):
+    return (x[:, 0] - _HOLDER.pos[1]).norm_sqr()
+
+
+def test_an_energy_that_reads_fields_is_refused_naming_them():
+    # issue 24: an energy sees its element's x and p only; a field read inside (a neighbour's
+    # position, a height map) gets no gradient through its index, so it is refused, not computed wrong
+    from engine.forces.user import fields_read
+
+    assert fields_read(_spring_psi) == [] and fields_read(_well) == []
+    assert fields_read(_reads_heights) == ["_HEIGHTS"]
+    assert fields_read(_calls_a_reader) == ["_HEIGHTS"]  # through the ti.funcs it calls
+    assert fields_read(_reads_neighbour) == ["_HOLDER.pos"]
+    for fn, name in ((_reads_heights, "_HEIGHTS"), (_calls_a_reader, "_HEIGHTS"), (_reads_neighbour, "_HOLDER.pos")):
+        with pytest.raises(ValueError, match=rf"^energy: {fn.__name__} reads the Taichi field\(s\) {name}: ") as e:
+            UserEnergy(fn, [[0, 1]], 2)
+        assert "\n" not in str(e.value)
+
+
 def _body(**kw):
     d = dict(type="solid", resolution=[3, 3, 3], size=[0.3, 0.3, 0.3], pins=[])
     d.update(kw)

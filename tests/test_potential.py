@@ -16,6 +16,7 @@ from helpers import on_thread_counts
 import taichi as ti
 
 from engine.api import SceneBuilder
+from engine.runtime import ensure_init
 from engine.scene import SimulationDiverged
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -184,10 +185,21 @@ def test_a_rejected_adaptive_attempt_leaves_no_kick():
     assert ps.state.particle_vel.to_numpy().tobytes() == v0.tobytes()
 
 
+ensure_init()
+_TERRAIN = ti.field(ti.f32, 8)  # a height map: no gradient through its index, so refused
+
+
+@ti.func
+def _reads_terrain(x, p):
+    return 9.81 * (x[1] - _TERRAIN[0])
+
+
 def test_wrong_use_is_refused_in_one_line_and_changes_nothing():
     s = scene()
     cases = [
         (dict(potential=lambda x, p: 0.0), ValueError, "add_potential: potential: must be a @ti.func"),
+        (dict(potential=_reads_terrain), ValueError,
+         r"add_potential: potential: _reads_terrain reads the Taichi field\(s\) _TERRAIN: "),
         (dict(params="k"), ValueError, "add_potential: params: 'k' is not a 1-D sequence"),
         (dict(params=2.0), ValueError, r"add_potential: params: .* \(a scalar: give \[2.0\]\)"),
         (dict(params=[[1.0, 2.0]]), ValueError, r"add_potential: params: shape \(1, 2\)"),

@@ -22,6 +22,63 @@ from ..xpbd.schedule import greedy_colors, schedule
 from .elements import node_slots
 
 
+def fields_read(fn, seen=None) -> list:
+    """The Taichi fields and ndarrays a ``ti.func`` reaches through its globals and closure
+    (and those of the ``ti.func`` s it calls), as "name" or "name.attr": an energy or potential
+    that reads one sees state other than its element's x and p (a neighbour's position, a
+    height map) — Taichi's autodiff gives no gradient through an index, so its forces would be
+    silently wrong. Empty for a function that reads only its arguments and constants."""
+    import inspect
+
+    from taichi.lang._ndarray import Ndarray
+    from taichi.lang.field import Field
+
+    seen = set() if seen is None else seen
+    py = inspect.unwrap(fn)
+    code = getattr(py, "__code__", None)
+    if code is None or code in seen:
+        return []
+    seen.add(code)
+    scope = dict(getattr(py, "__globals__", {}))
+    if py.__closure__:
+        scope.update({n: c.cell_contents for n, c in zip(code.co_freevars, py.__closure__)
+                      if _filled(c)})
+    names = set(code.co_names) | set(code.co_freevars)
+    found = []
+    for n in sorted(names):
+        if n not in scope:
+            continue
+        v = scope[n]
+        if isinstance(v, (Field, Ndarray)):
+            found.append(n)
+        elif getattr(v, "_is_taichi_function", False):
+            found += fields_read(v, seen)
+        elif not inspect.ismodule(v):
+            found += [f"{n}.{a}" for a in sorted(names) if isinstance(getattr(v, a, None), (Field, Ndarray))]
+    return found
+
+
+def _filled(cell) -> bool:
+    try:
+        cell.cell_contents
+    except ValueError:  # a closure cell not yet assigned
+        return False
+    return True
+
+
+def check_reads(key: str, fn) -> None:
+    """Refuse a ``ti.func`` that reads Taichi fields (:func:`fields_read`) in one line naming
+    them; ``key``: how the message names the argument ("energy", "add_potential: potential")."""
+    found = fields_read(fn)
+    if found:
+        import inspect
+
+        name = getattr(inspect.unwrap(fn), "__name__", "?")
+        raise ValueError(f"{key}: {name} reads the Taichi field(s) {', '.join(found)}: it may read only its "
+                         f"arguments (x, p) and constants — a field read inside gets no gradient through its "
+                         f"index (silently wrong forces); pass what it needs in params")
+
+
 @ti.kernel
 def _gather(g: ti.template(), w: ti.template(), A: ti.template(), j: ti.i32):
     """fe = −∂ψ/∂xe per slot (one writer each), then A[j, i] += w_i Σ its slots in order."""
@@ -49,6 +106,7 @@ class UserEnergy:
     def __init__(self, energy, nodes, n_nodes: int, params=None, dtype=ti.f32, name: str = "user"):
         if not getattr(energy, "_is_taichi_function", False):
             raise ValueError(f"energy: must be a @ti.func of (x, p), got {type(energy).__name__}")
+        check_reads("energy", energy)
         nodes = np.asarray(nodes, np.int64)
         if nodes.ndim != 2 or nodes.shape[1] < 1 or nodes.shape[1] > 8:
             raise ValueError(f"nodes: expected an (E, k) array with 1 <= k <= 8, got shape {nodes.shape}")

@@ -32,6 +32,7 @@ dies in the step takes no second kick.
 import numpy as np
 import taichi as ti
 
+from ..forces.user import check_reads
 from ..ode.steppers import is_finite
 
 PRE, POST, REPORT = 0, 1, 2  # what gather() selects: the step's first kick, its second, the energy report
@@ -42,6 +43,7 @@ def check_function(where: str, potential) -> None:
     if not getattr(potential, "_is_taichi_function", False):
         raise ValueError(f"{where}: potential: must be a @ti.func of (x, p) returning U (J/kg), got "
                          f"{type(potential).__name__} {getattr(potential, '__name__', '')}".rstrip())
+    check_reads(f"{where}: potential", potential)
 
 
 def check_params(where: str, params) -> np.ndarray:
