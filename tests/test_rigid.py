@@ -225,6 +225,27 @@ def test_ode_path_box_lands_and_rests_on_a_fixed_box(integrator):
     assert np.array_equal(S.x[0], [0.0, 0.25, 0.0])  # the fixed base never moves
 
 
+@pytest.mark.slow  # (two scene compiles: the default run stays under 5 minutes)
+@pytest.mark.parametrize("integrator", ["xpbd", "rk4"])
+def test_bodies_rest_on_box_and_capsule_colliders(integrator):
+    # a config's box and capsule colliders are met as boxes and capsules on both paths (they were
+    # taken for spheres of the default radius: a ball dropped on a table bounced off to the side)
+    colliders = (GROUND, {"type": "box", "name": "table", "center": [0.0, 0.5, 0.0], "half_extents": [1.0, 0.5, 1.0],
+                          "restitution": 0.0, "friction": 0.5},
+                 {"type": "capsule", "name": "pipe", "center": [4.0, 0.3, 0.0], "radius": 0.3, "half_length": 1.0,
+                  "orientation": quat.normalize(np.array([1.0, 0.0, 0.0, 1.0])).tolist(), "restitution": 0.0})
+    s = scene([{"name": "ball", "shape": "sphere", "radius": 0.1, "position": [0.3, 2.0, 0.0], "restitution": 0.0},
+               {"name": "crate", "shape": "box", "half_extents": [0.2, 0.2, 0.2], "position": [-0.5, 2.5, 0.0],
+                "restitution": 0.0},
+               {"name": "puck", "shape": "sphere", "radius": 0.1, "position": [4.0, 1.5, 0.0], "restitution": 0.0}],
+              colliders=colliders, integrator=integrator, solver_h=1 / 240)
+    run(s, 2.0)
+    x = s.rigid.state.x
+    assert abs(x[0, 1] - 1.1) < 5e-3 and abs(x[0, 0] - 0.3) < 0.05, x[0]  # on the table top (y = 1)
+    assert abs(x[1, 1] - 1.2) < 5e-3 and abs(x[1, 0] + 0.5) < 0.05, x[1]
+    assert abs(x[2, 1] - 0.7) < 5e-3, x[2]  # on top of the pipe (its axis along x at y = 0.3, r = 0.3)
+
+
 THREADS = """
 import hashlib, sys
 from engine import runtime

@@ -127,8 +127,9 @@ class BaraffSystem:
     def _contacts(self, h: float) -> None:
         own, m = self.owner, self.model
         planes = [(k, s) for k, s in enumerate(own.specs) if s.kind == "plane"]
+        shapes = [(k, s) for k, s in enumerate(own.specs) if s.kind != "plane"]
         pairs = m.count > 1 and m.dynamic.any()
-        if not (planes or pairs) or m.count == 0:
+        if not (planes or shapes or pairs) or m.count == 0:
             return
         Y = self.Y.to_numpy()
         y = Y[: m.count]
@@ -152,34 +153,56 @@ class BaraffSystem:
                 y[i, 0:3] += d * n  # back onto the plane
                 pa = pa + d * n
                 self._impulse(y, i, pa, n, float(spec.restitution), 0.5 * (m.body_friction[i] + spec.friction), gl, h)
-        if pairs:
-            changed |= self._pair_contacts(y, gl, h)
+        if shapes or pairs:
+            changed |= self._solid_contacts(y, shapes, pos, gl, h)
         if changed:
             y[:, 3:7] = quat.normalize(y[:, 3:7])
             self.Y.from_numpy(Y)
 
-    def _pair_contacts(self, y, gl, h) -> bool:
-        """Body–body contacts of the bodies as ``y`` (B, 14) holds them: penetrations taken out,
-        then CONTACT_SWEEPS sweeps of two-body impulses (module docstring). Whether any."""
+    def _solid_contacts(self, y, shapes, pos, gl, h) -> bool:
+        """Contacts of the bodies as ``y`` (B, 14) holds them with the scene's sphere, box and
+        capsule colliders (``shapes``: (index, spec), placed at ``pos``) and with each other:
+        penetrations taken out, then CONTACT_SWEEPS sweeps of impulses (module docstring).
+        Whether there were any."""
         own, m = self.owner, self.model
         R = quat.matrix(y[:, 3:7])
         # contacts within MARGIN count (a box resting on another keeps all four corners of its
         # manifold, not the one or two that happen to be inside after a step: those alone would
         # rock it); only penetrations are moved
-        got = own.pair_contacts(y[:, 0:3], R, np.full(m.count, 0.5 * MARGIN), m.dynamic)
-        if got is None:
+        margins = np.full(m.count, 0.5 * MARGIN)
+        a, b, pa, pb, n, e, mu = [], [], [], [], [], [], []
+        for k, spec in shapes:  # b = −1: the world
+            for i, ca, cb, cn in own.static_shape_contacts(k, spec, pos[k], own.t, y[:, 0:3], R, margins,
+                                                           np.flatnonzero(m.dynamic)):
+                a.append(i)
+                b.append(-1)
+                pa.append(ca)
+                pb.append(cb)
+                n.append(cn)
+                e.append(max(m.body_restitution[i], spec.restitution))
+                mu.append(0.5 * (m.body_friction[i] + spec.friction))
+        got = own.pair_contacts(y[:, 0:3], R, margins, m.dynamic) if m.count > 1 else None
+        if got is not None:
+            i, j, ca, cb, cn = got
+            a += i.tolist()
+            b += j.tolist()
+            pa += list(ca)
+            pb += list(cb)
+            n += list(cn)
+            e += np.maximum(m.body_restitution[i], m.body_restitution[j]).tolist()
+            mu += (0.5 * (m.body_friction[i] + m.body_friction[j])).tolist()
+        if not a:
             return False
-        a, b, pa, pb, n = got
+        pa, pb, n = np.array(pa), np.array(pb), np.array(n)
         depth = np.einsum("ij,ij->i", pb - pa, n)
-        wa, wb = m.body_inv_mass[a], m.body_inv_mass[b]
         for k in range(len(a)):  # out of each other along n, split by inverse mass
-            w = wa[k] + wb[k]
-            if w > 0.0 and depth[k] > 0.0:
-                y[a[k], 0:3] += depth[k] * (wa[k] / w) * n[k]
-                y[b[k], 0:3] -= depth[k] * (wb[k] / w) * n[k]
+            wa = m.body_inv_mass[a[k]]
+            wb = m.body_inv_mass[b[k]] if b[k] >= 0 else 0.0
+            if wa + wb > 0.0 and depth[k] > 0.0:
+                y[a[k], 0:3] += depth[k] * (wa / (wa + wb)) * n[k]
+                if b[k] >= 0:
+                    y[b[k], 0:3] -= depth[k] * (wb / (wa + wb)) * n[k]
         p = 0.5 * (pa + pb)  # the contact point, midway between the two surfaces
-        e = np.maximum(m.body_restitution[a], m.body_restitution[b])
-        mu = 0.5 * (m.body_friction[a] + m.body_friction[b])
         for _ in range(CONTACT_SWEEPS):
             for k in range(len(a)):
                 self._impulse(y, a[k], p[k], n[k], float(e[k]), float(mu[k]), gl, h, other=int(b[k]))

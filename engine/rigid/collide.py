@@ -215,16 +215,27 @@ def plane_contacts(model, x, R, P, N, margins, bodies):
     return idx[hit], pa, pa - s[hit][:, None] * N
 
 
-def sphere_collider_contacts(model, x, R, C, Rc, margins, bodies):
-    """Contacts of ``bodies`` with a static sphere (centre C, radius Rc), the bodies outside it."""
+def shape_collider_contacts(model, x, R, kind, C, Rc, geometry, margins, bodies):
+    """Contacts of ``bodies`` with a static shape of ``kind`` (SPHERE, BOX or CAPSULE codes) at
+    C turned by Rc (3, 3), ``geometry`` its (radius, half extents, half length), the bodies
+    outside it: (body, p_a, p_b, n) rows, by body then point (the same closest points as two
+    bodies, :func:`pair`)."""
+    radius, half, half_length = geometry
+    bound = {SPHERE: radius, BOX: float(np.linalg.norm(half)) if half is not None else 0.0,
+             CAPSULE: radius + half_length}[kind]
     out = []
     for i in bodies:
-        if np.linalg.norm(x[i] - C) - model.body_bound[i] - Rc > margins[i]:
+        if np.linalg.norm(x[i] - C) - model.body_bound[i] - bound > margins[i]:
             continue
         g = (model.body_radius[i], model.body_half[i], model.body_half_length[i])
-        for pa, pb, n in pair(model.body_shape[i], SPHERE, x[i], R[i], C, np.eye(3), g, (Rc, None, 0.0), margins[i]):
+        for pa, pb, n in pair(model.body_shape[i], kind, x[i], R[i], C, Rc, g, geometry, margins[i]):
             out.append((i, pa, pb, n))
     return out
+
+
+def sphere_collider_contacts(model, x, R, C, Rc, margins, bodies):
+    """Contacts of ``bodies`` with a static sphere (centre C, radius Rc), the bodies outside it."""
+    return shape_collider_contacts(model, x, R, SPHERE, C, np.eye(3), (Rc, None, 0.0), margins, bodies)
 
 
 def broad_phase(x, bound, margin):

@@ -22,7 +22,7 @@ from .quat import cross
 from .joints import Joints
 from .model import RigidModel, RigidState
 from .shapes import SPHERE
-from .shapes import BOX, mesh
+from .shapes import BOX, CODES, mesh
 from .xpbd import ContactSet, XPBDSolver
 
 SLOP = 0.005  # m: contacts are kept this far apart before touching (and a step's motion more)
@@ -174,8 +174,8 @@ class RigidSystem(SystemBase):
                 nrm = nrm / np.linalg.norm(nrm)
                 a, pa, pb = collide.plane_contacts(m, S.x, R, p, nrm, margins, live)
                 n = np.broadcast_to(nrm, pa.shape)
-            else:
-                rows = collide.sphere_collider_contacts(m, S.x, R, p, float(spec.radius), margins, live)
+            else:  # a sphere, box or capsule collider, posed where the control has it at t
+                rows = self.static_shape_contacts(k, spec, p, t, S.x, R, margins, live)
                 a = np.array([r[0] for r in rows], np.int64)
                 pa, pb, n = (np.array([r[c] for r in rows], np.float64).reshape(-1, 3) for c in (1, 2, 3))
             K = len(a)
@@ -191,6 +191,15 @@ class RigidSystem(SystemBase):
                     np.zeros((0, 3)), np.zeros(0), np.zeros(0)]
         self._wake(cols[0], cols[1])
         return ContactSet(m, S, *cols, statics=[s.name or f"colliders[{k}]" for k, s in enumerate(self.specs)])
+
+    def static_shape_contacts(self, k, spec, p, t, x, R, margins, bodies):
+        """Contacts of ``bodies`` with the scene's sphere, box or capsule collider k (``spec``) at
+        position p and its orientation at time t: (body, p_a, p_b, n) rows (engine.rigid.collide)."""
+        if spec.kind == "sphere":
+            return collide.sphere_collider_contacts(self.model, x, R, p, float(spec.radius), margins, bodies)
+        Rk = quat.matrix(self.control.collider_orientations(t)[k][None])[0]
+        geometry = (float(spec.radius), np.asarray(spec.half_extents, np.float64), float(spec.half_length))
+        return collide.shape_collider_contacts(self.model, x, R, CODES[spec.kind], p, Rk, geometry, margins, bodies)
 
     def pair_contacts(self, x, R, margins, moving):
         """Body–body contacts of bodies at ``x`` (B, 3) turned by ``R`` (B, 3, 3), each grown by
