@@ -123,6 +123,48 @@ def test_pair_gravity_conserves_momentum():
     assert np.abs(v1.sum(0) - v0.sum(0)).max() < 1e-4 * moved
 
 
+
+def test_particle_mesh_gravity_keeps_momentum_and_follows_the_pair_sum():
+    """Beyond MAX_DIRECT slots gravity is particle–mesh (engine.particles.pm): with the same
+    cloud-in-cell weights for deposit and gather, a symmetric Green's function and central
+    differences, Σ m a = 0 to the FFT's rounding; on a Gaussian cluster of 4,000 stars its
+    accelerations are within 8 % (median, of the RMS acceleration) of the direct pair sum, 15 % at
+    the 90th percentile (it smooths over about a cell of the 32³ grid)."""
+    from engine.particles.pm import direct_accelerations, pm_accelerations
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(4000, 3)) * [1.0, 0.7, 1.3] + [5.0, -2.0, 0.5]
+    a = pm_accelerations(x, 1.0, 2.5e-4, 0.1)
+    b = direct_accelerations(x, 1.0, 2.5e-4, 0.1)
+    rms = float(np.sqrt((b ** 2).sum(1).mean()))
+    assert np.abs(a.sum(0)).max() < 1e-12 * rms * len(x)
+    e = np.linalg.norm(a - b, axis=1) / rms
+    assert np.median(e) < 0.08 and np.percentile(e, 90) < 0.15, (np.median(e), np.percentile(e, 90))
+    assert np.array_equal(a, pm_accelerations(x.copy(), 1.0, 2.5e-4, 0.1))  # the same bytes again
+
+
+@pytest.mark.slow  # (25,000 stars: a host FFT a step)
+def test_a_cluster_past_the_direct_limit_runs_on_the_mesh_and_keeps_momentum():
+    cfg = {"fps": 30.0, "frames": 10, "solver": {"h": 1.0 / 60.0}, "forces": {"gravity": [0.0, 0.0, 0.0]},
+           "emitters": [{"shape": "sphere", "radius": 1.0, "speed": [0.0, 0.0],
+                         "bursts": [{"time": 0.0, "count": 25_000}], "lifetime": 100.0, "capacity": 25_000,
+                         "interact": {"kind": "gravity", "radius": 0.01, "G": 1.0, "mass": 4e-5,
+                                      "softening": 0.05}}]}
+    sc = _scene(cfg)
+    assert sc.particles.interact.mesh
+    sc.advance_frame()
+    v0 = sc.velocities().astype(np.float64)
+    _run(sc, 9)
+    v1 = sc.velocities().astype(np.float64)
+    assert len(v1) == 25_000
+    moved = np.abs(v1 - v0).sum()
+    assert moved > 100.0  # the cluster falls in on itself
+    r0 = np.linalg.norm(sc.positions(), axis=1)
+    assert np.abs(v1.sum(0) - v0.sum(0)).max() < 1e-4 * moved
+    inward = np.einsum("ij,ij->i", v1, sc.positions()) / np.maximum(r0, 1e-9)
+    assert np.median(inward) < 0  # toward the centre
+
+
 # -- grains --------------------------------------------------------------------------------------
 def _pour(friction, rate=300.0, stop=1.2, frames=66):
     """configs/sand.toml with its friction, rate and stop changed, run for ``frames``."""

@@ -100,9 +100,12 @@ class SubEmitter(Strict):
 
 INTERACT_KINDS = ("granular", "fluid", "gravity", "repel")
 MAX_INTERACT_RADIUS = 1.0  # m: a grid cell is 2–4 radii; larger grains belong to rigid bodies
-MAX_DIRECT = 20_000  # gravity slots summed over all pairs at most (no approximation beyond is built)
+MAX_DIRECT = 20_000  # gravity slots summed over all pairs at most (method = "direct")
+AUTO_DIRECT = 2_000  # method = "auto": the pair sum up to this many gravity slots, particle–mesh beyond
+# (engine.particles.pm; on two cores the two cost the same near 2,000 slots: ~25 ms a step)
+MAX_MESH = 2_000_000  # gravity slots at most on the particle–mesh path (host arrays of N × 3 float64)
 # keys that mean something for one kind only (a key for another kind is refused, naming its kind)
-_KIND_KEYS = {"friction": "granular", "cohesion": "granular", "G": "gravity", "softening": "gravity",
+_KIND_KEYS = {"friction": "granular", "cohesion": "granular", "G": "gravity", "softening": "gravity", "method": "gravity",
               "mass": "gravity", "viscosity": "fluid", "vorticity": "fluid", "surface_tension": "fluid"}
 
 
@@ -114,7 +117,9 @@ class Interact(Strict):
     fluid: position-based fluid at rest spacing 2·radius; ``viscosity`` (XSPH c, a fraction),
     ``vorticity`` (confinement ε, m/s), ``surface_tension`` (cohesion acceleration, m/s²).
     gravity: softened pair attraction, ``G`` (m³/(kg·s²)), ``softening`` ε (m), ``mass`` per particle
-    (kg); ``radius`` is unused by the pair sum but kept for a uniform table. repel: pairs closer
+    (kg), ``method`` "direct" (every pair, up to MAX_DIRECT slots), "mesh" (particle–mesh,
+    engine.particles.pm) or "auto" (direct up to AUTO_DIRECT slots, mesh beyond); ``radius`` is
+    unused by gravity but kept for a uniform table. repel: pairs closer
     than 2·radius pushed softly apart. ``iterations``: Jacobi sweeps per step."""
 
     kind: str
@@ -128,6 +133,7 @@ class Interact(Strict):
     vorticity: Annotated[float, Field(ge=0, le=100)] = 0.0
     surface_tension: Annotated[float, Field(ge=0, le=1e3)] = 0.0
     iterations: Annotated[int, Field(ge=1, le=20)] = 4
+    method: Literal["auto", "direct", "mesh"] = "auto"  # gravity: every pair, particle–mesh, or by count
 
     @model_validator(mode="after")
     def _check(self):
@@ -541,8 +547,8 @@ class Render(Strict):
 
 
 def _check_interact(emitters, slots):
-    """Emitters of one kind share one interact table; gravity's pair sum stays under MAX_DIRECT
-    slots; the grid and its fields fit the memory budget (estimated before allocation)."""
+    """Emitters of one kind share one interact table; gravity stays under MAX_MESH slots (the
+    pair sum up to MAX_DIRECT, particle–mesh beyond); the grid and its fields fit the memory budget (estimated before allocation)."""
     from ..geometry.sizing import MAX_GRID_BYTES, interact_bytes
 
     problems, first = [], {}
@@ -555,9 +561,13 @@ def _check_interact(emitters, slots):
         if j != i and emitters[j].interact != it:
             problems.append((key, f"emitters of kind {it.kind!r} share one table; emitters[{j}]'s differs"))
     grav = sum(n for em, n in zip(emitters, slots) if em.interact is not None and em.interact.kind == "gravity")
-    if grav > MAX_DIRECT:
-        problems.append((("emitters", first["gravity"], "interact"), f"gravity over {grav:,} slots; the pair "
-                         f"sum takes at most {MAX_DIRECT:,} (lower rate or lifetime, or set capacity)"))
+    if grav and emitters[first["gravity"]].interact.method == "direct" and grav > MAX_DIRECT:
+        problems.append((("emitters", first["gravity"], "interact", "method"), f"'direct' over {grav:,} gravity "
+                         f"slots; the pair sum takes at most {MAX_DIRECT:,} (use 'mesh' or 'auto', lower rate or "
+                         f"lifetime, or set capacity)"))
+    elif grav > MAX_MESH:
+        problems.append((("emitters", first["gravity"], "interact"), f"gravity over {grav:,} slots; the "
+                         f"particle-mesh path takes at most {MAX_MESH:,} (lower rate or lifetime, or set capacity)"))
     if first:
         need = interact_bytes(sum(slots), "fluid" in first)
         if need > MAX_GRID_BYTES:

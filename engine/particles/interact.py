@@ -24,8 +24,9 @@ After the integrator's step (forces, colliders) the pool's step calls :meth:`Int
 - fluid: XSPH viscosity (eq. 17), vorticity confinement (eqs. 15–16) and a surface-tension term
   (the cohesion kernel of Akinci et al. 2013, "Versatile surface tension and adhesion for SPH");
 - ``gravity``: a kick v += h·a(x) with softened pair attraction a_i = G m Σ_j r_ij/(|r_ij|² + ε²)^{3/2},
-  over all pairs (a per-i gather; the schema refuses more than MAX_DIRECT gravity slots: no
-  approximation beyond is built);
+  over all pairs (a per-i gather; ``method = "direct"``, or "auto" up to AUTO_DIRECT gravity
+  slots) or by a particle–mesh approximation on the host (``"mesh"``, or "auto" beyond) (:mod:`engine.particles.pm`: cloud-in-cell on a 32³ grid, isolated
+  FFT convolution; momentum kept to rounding, forces smoothed over about a cell);
 - every member is projected onto the colliders again (after the constraint solve), so every kind
   still collides with them.
 """
@@ -34,7 +35,9 @@ import math
 import numpy as np
 import taichi as ti
 
+from ..config.schema import AUTO_DIRECT
 from ..geometry.grid import HashGrid
+from . import pm
 
 KINDS = {"granular": 1, "fluid": 2, "gravity": 3, "repel": 4}
 GRID_KINDS = ("granular", "fluid", "repel")
@@ -87,7 +90,7 @@ class Interactions:
     the step's end before the solve, m and m/s), ``corr`` (vec3 f32: the solve's total Δx, m),
     ``delta`` (a sweep's Jacobi Δx); fluid adds ``lam`` (f32), ``omega`` (vec3, 1/s), ``vbuf``."""
 
-    def __init__(self, state, configs, rows: int, colliders):
+    def __init__(self, state, configs, rows: int, colliders, sizes=None):
         self.state, self.cap = state, max(1, state.capacity)
         self.colliders = colliders
         self.has_colliders = colliders is not None and colliders.count > 0
@@ -134,21 +137,40 @@ class Interactions:
         if self.repel:
             self.r_d = 2.0 * self.params["repel"].radius
             cell = max(cell, self.r_d)
+        self.mesh = False  # gravity by particle–mesh (method "mesh", or "auto" past AUTO_DIRECT slots)
         if self.gravity:
             p = self.params["gravity"]
             self.gm = float(p.G) * float(p.mass)
             self.eps2 = float(p.softening) ** 2
+            slots = sum(int(n) for e, n in enumerate(sizes) if kinds[e] == KINDS["gravity"]) if sizes else n
+            self.mesh = p.method == "mesh" or (p.method == "auto" and slots > AUTO_DIRECT)
+            if self.mesh:
+                self.g_acc = ti.Vector.field(3, ti.f32, shape=n)  # the mesh's accelerations, m/s²
         self.grid = HashGrid(n, cell) if cell > 0 else None
 
     # -- per-step entry --------------------------------------------------------------------------
     def step(self, h: float) -> None:
         """Interact over the step of h just taken (positions and velocities at its end)."""
         self.prepare()
+        if self.mesh:
+            self._mesh_gravity()
         if self.grid is not None:
             self.grid.build(self.state.particle_pos, self.member)
             for _ in range(self.iterations):
                 self.sweep(h)
         self.finish(h)
+
+    def _mesh_gravity(self) -> None:
+        """The gravity slots' accelerations by particle–mesh (engine.particles.pm), at the step's
+        end positions, into ``g_acc`` (the finish kernel's kick reads them)."""
+        kind = self.slot_kind.to_numpy()
+        on = np.flatnonzero(kind == KINDS["gravity"])
+        acc = np.zeros((self.cap, 3), np.float32)
+        if len(on) > 1:
+            p = self.params["gravity"]
+            x = self.state.particle_pos.to_numpy()[on]
+            acc[on] = pm.pm_accelerations(x, float(p.G), float(p.mass), float(p.softening)).astype(np.float32)
+        self.g_acc.from_numpy(acc)
 
     def stats(self) -> dict:
         return self.grid.stats() if self.grid is not None else {}
@@ -411,10 +433,14 @@ class Interactions:
             for i in range(self.cap):
                 if self.slot_kind[i] == 2:
                     self.vbuf[i] = self._fluid_velocity(i, h)
-        if ti.static(self.gravity):
+        if ti.static(self.gravity and not self.mesh):
             for i in range(self.cap):
                 if self.slot_kind[i] == 3:
                     self.delta[i] = S.particle_vel[i] + h * self._gravity(i)
+        if ti.static(self.mesh):
+            for i in range(self.cap):
+                if self.slot_kind[i] == 3:
+                    self.delta[i] = S.particle_vel[i] + h * self.g_acc[i]
         for i in range(self.cap):
             k = self.slot_kind[i]
             if k != 0:
