@@ -20,7 +20,7 @@ from engine.config import load_config  # noqa: E402
 from engine.forces import elements as el  # noqa: E402
 from engine.forces.elements import ElementGroup  # noqa: E402
 from engine.forces.terms import lame  # noqa: E402
-from engine.forces.user import UserEnergy  # noqa: E402
+from engine.forces.user import UserEnergy, central_difference_forces  # noqa: E402
 from engine.springs import SpringSystem, chain, cloth, solid  # noqa: E402
 from engine.springs.topology import hinges  # noqa: E402
 
@@ -39,17 +39,7 @@ def _forces_and_fd(g, x):
     X.from_numpy(x)
     g.add_forces(X, V, w, A, 0)
     f = A.to_numpy()[0]
-    eps, fd = 1e-6, np.zeros_like(x)
-    for i in range(n):
-        for c in range(3):
-            p = x.copy()
-            p[i, c] += eps
-            X.from_numpy(p)
-            ep = g.energy(X)
-            p[i, c] -= 2 * eps
-            X.from_numpy(p)
-            fd[i, c] = -(ep - g.energy(X)) / (2 * eps)
-    return f, fd
+    return f, central_difference_forces(g.energy, X, x, 1e-6)
 
 
 _RNG = np.random.default_rng(0)

@@ -79,6 +79,24 @@ def check_reads(key: str, fn) -> None:
                          f"index (silently wrong forces); pass what it needs in params")
 
 
+def central_difference_forces(energy, field, X, eps: float) -> np.ndarray:
+    """(N, 3) −∂E/∂x by central differences: ``energy(field)`` → E (J) of the positions written
+    into ``field`` (N vec3, f64), each coordinate of ``X`` (N, 3) moved by ±``eps`` m in turn (a
+    reference for gradient checks; ``field`` is left at the last probe)."""
+    X = np.asarray(X, np.float64)
+    fd = np.zeros_like(X)
+    for i in range(len(X)):
+        for c in range(3):
+            p = X.copy()
+            p[i, c] += eps
+            field.from_numpy(p)
+            ep = energy(field)
+            p[i, c] -= 2 * eps
+            field.from_numpy(p)
+            fd[i, c] = -(ep - energy(field)) / (2 * eps)
+    return fd
+
+
 @ti.kernel
 def _gather(g: ti.template(), w: ti.template(), A: ti.template(), j: ti.i32):
     """fe = −∂ψ/∂xe per slot (one writer each), then A[j, i] += w_i Σ its slots in order."""
@@ -241,14 +259,5 @@ class UserEnergy:
         field = ti.Vector.field(3, ti.f64, max(1, self.n_nodes))
         field.from_numpy(X)
         f = self.forces(field)
-        fd = np.zeros_like(X)
-        for i in range(len(X)):
-            for c in range(3):
-                p = X.copy()
-                p[i, c] += eps
-                field.from_numpy(p)
-                ep = self.energy(field)
-                p[i, c] -= 2 * eps
-                field.from_numpy(p)
-                fd[i, c] = -(ep - self.energy(field)) / (2 * eps)
+        fd = central_difference_forces(self.energy, field, X, eps)
         return float(np.max(np.abs(f - fd)) / max(1e-300, np.max(np.abs(fd))))

@@ -43,18 +43,26 @@ def _rk_lincomb(x: ti.template(), v: ti.template(), a: ti.template(), vs: ti.tem
             vs[j, i] = vn
 
 
+@ti.func
+def kick_drift_node(x: ti.template(), v: ti.template(), a: ti.template(), i, hh, slot: ti.template(),
+                    kick: ti.template(), drifts: ti.template()):
+    """Node i's kick v += w·h·a[slot, i], then x += w_d·h·v for each drift weight in ``drifts``
+    (the splitting's segment; hh = h in the fields' dtype): shared by the staged kernels and the
+    soft bodies' fused frame (engine.springs.fused)."""
+    vi = lincomb(v[i], hh, kick, [a[slot, i]], x.dtype)
+    v[i] = vi
+    xi = x[i]
+    for d in ti.static(range(len(drifts))):
+        xi = lincomb(xi, hh, drifts[d], [vi], x.dtype)
+    x[i] = xi
+
+
 @ti.kernel
 def _kick_drifts(x: ti.template(), v: ti.template(), a: ti.template(), n: ti.i32, h: ti.f64,
                  slot: ti.template(), kick: ti.template(), drifts: ti.template()):
     """v += w·h·a[slot]; then x += w_d·h·v for each drift weight in ``drifts``."""
     for i in range(n):
-        hh = ti.cast(h, x.dtype)
-        vi = lincomb(v[i], hh, kick, [a[slot, i]], x.dtype)
-        v[i] = vi
-        xi = x[i]
-        for d in ti.static(range(len(drifts))):
-            xi = lincomb(xi, hh, drifts[d], [vi], x.dtype)
-        x[i] = xi
+        kick_drift_node(x, v, a, i, ti.cast(h, x.dtype), slot, kick, drifts)
 
 
 class FieldStepper:

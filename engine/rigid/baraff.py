@@ -214,7 +214,7 @@ class BaraffSystem:
         stops the sliding); e = 0 for an approach slower than 2|g|h (resting contact)."""
         m = self.model
         bodies = (i,) if other < 0 else (i, other)
-        r, Iinv, vp, k_of = {}, {}, np.zeros(3), []
+        r, Iinv, vp = {}, {}, np.zeros(3)
         for s, c in zip(bodies, (1.0, -1.0)):
             r[s] = p - y[s, 0:3]
             Iinv[s] = (lambda q_, s_: lambda v: quat.rotate(q_, m.body_inv_inertia[s_] * quat.rotate_inv(q_, v)))(y[s, 3:7], s)

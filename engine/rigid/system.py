@@ -318,6 +318,10 @@ class RigidSystem(SystemBase):
         if point is not None:
             r = np.asarray(point, np.float64) - S.x[i]
             S.w[i] += m.inv_inertia_world(S.q[i], i, cross(r, J))
+        self._changed(i)
+
+    def _changed(self, i: int) -> None:
+        """Body i's state was set from outside the step: wake it, and reload the ODE path's Y."""
         self.wake(i)
         if self.ode is not None:
             self.ode.load()
@@ -327,18 +331,14 @@ class RigidSystem(SystemBase):
             self.state.x[i] = position
         if orientation is not None:
             self.state.q[i] = quat.normalize(np.asarray(orientation, np.float64))
-        self.wake(i)
-        if self.ode is not None:
-            self.ode.load()
+        self._changed(i)
 
     def set_velocity(self, i: int, velocity=None, angular_velocity=None) -> None:
         if velocity is not None:
             self.state.v[i] = velocity
         if angular_velocity is not None:
             self.state.w[i] = angular_velocity
-        self.wake(i)
-        if self.ode is not None:
-            self.ode.load()
+        self._changed(i)
 
     def body_state(self, i: int) -> dict:
         S = self.state

@@ -25,7 +25,7 @@ one; the GPU keeps the launch-by-launch path, whose colour loops are parallel).
 """
 import taichi as ti
 
-from ..ode.steppers import lincomb
+from ..ode.staged import kick_drift_node
 from ..xpbd.constraints import sweep_serial
 from ..xpbd.solver import predict_node
 from .constraints import drive_node, finalize_node
@@ -87,13 +87,8 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
                 slot, kick, drifts = ti.static(segments[seg][0], segments[seg][1], segments[seg][2])
                 for i in range(n):
                     A[slot, i] = gather_node(model, fields, g, X, V, i)
-                for i in range(n):  # as engine.ode.staged._kick_drifts
-                    vi = lincomb(V[i], hh, kick, [A[slot, i]], model.dtype)
-                    V[i] = vi
-                    xi = X[i]
-                    for d in ti.static(range(len(drifts))):
-                        xi = lincomb(xi, hh, drifts[d], [vi], model.dtype)
-                    X[i] = xi
+                for i in range(n):
+                    kick_drift_node(X, V, A, i, hh, slot, kick, drifts)
         for i in range(n):
             finalize_node(model, state, contacts, x0, v0, bad_t, alpha, t_end, h, log, i)
     return bad_t[None]
