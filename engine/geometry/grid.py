@@ -17,9 +17,10 @@ bucket, whatever the thread count.
 No cap anywhere: a bucket holds as many slots as hash to it (buckets are ranges of one array sized
 to the pool). A slot whose cell index does not fit in 30 bits (or whose position is not finite) is
 left out of the grid and counted in ``ungridded`` (reported, as pools count dropped particles);
-``max_bucket`` reports the fullest bucket of the last build. Readers gather per particle: visit the
-27 cells around ``cell_of(x)``, and within each the slots of its bucket whose ``slot_cell`` is that
-cell (two cells that share a bucket are told apart, so each neighbour is seen exactly once).
+``max_bucket`` reports the fullest bucket of the last build. Readers gather per particle
+(``for_neighbours``): visit the 27 cells around the slot's cell, and within each the slots of its
+bucket whose ``slot_cell`` is that cell (two cells that share a bucket are told apart, so each
+neighbour is seen exactly once).
 """
 
 import taichi as ti
@@ -75,6 +76,23 @@ class HashGrid:
     def neighbour_cell(self, c, n):
         """The n-th (0..26) cell of the 3×3×3 block around c, in a fixed order."""
         return c + ti.Vector([n % 3 - 1, (n // 3) % 3 - 1, n // 9 - 1])
+
+    @ti.func
+    def for_neighbours(self, i, kind: ti.template(), want, visit: ti.template(), args: ti.template()):
+        """Call ``visit(j, *args)`` for every slot j ≠ i with ``kind[j] == want`` in the 27 cells
+        around slot i's cell (i in the grid), in a fixed order: cell n = 0..26 (``neighbour_cell``),
+        then bucket order (by slot), so a gather's sums come out in the same order every time.
+        ``kind``: a per-slot field; ``visit``: a ti.func (or a data-oriented object's method);
+        ``args``: a tuple, passed on as it is: the visitor takes i's values by value and its
+        accumulators (local scalars or vectors) as ``ti.template()``, by reference, adding into them."""
+        c = self.slot_cell[i]
+        for n in range(27):
+            cc = self.neighbour_cell(c, n)
+            b = self.bucket(cc)
+            for k in range(self.start[b], self.start[b + 1]):
+                j = self.sorted[k]
+                if j != i and kind[j] == want and (self.slot_cell[j] == cc).all():
+                    visit(j, *args)
 
     @ti.kernel
     def build(self, pos: ti.template(), member: ti.template()):

@@ -208,100 +208,88 @@ class Interactions:
 
     @ti.func
     def _granular(self, i, h):
-        S, G = self.state, self.grid
+        S = self.state
         xi = S.particle_pos[i]
         di = h * S.particle_vel[i] + self.corr[i]  # i's displacement over the step so far
         dx = ti.Vector([0.0, 0.0, 0.0])
-        D, reach2 = self.g_d, self.g_reach * self.g_reach
-        c = G.slot_cell[i]
-        for n in range(27):
-            cc = G.neighbour_cell(c, n)
-            b = G.bucket(cc)
-            for k in range(G.start[b], G.start[b + 1]):
-                j = G.sorted[k]
-                if j != i and self.slot_kind[j] == 1 and (G.slot_cell[j] == cc).all():
-                    r = xi - S.particle_pos[j]
-                    d2 = r.dot(r)
-                    if 0.0 < d2 < reach2:
-                        d = ti.sqrt(d2)
-                        nrm = r / d
-                        if d < D:
-                            pen = D - d
-                            dx += 0.5 * pen * nrm
-                            rel = di - (h * S.particle_vel[j] + self.corr[j])
-                            t = rel - rel.dot(nrm) * nrm
-                            tl = t.norm()
-                            # static below μ·pen: all of t removed; kinetic: scaled to μ·pen
-                            dx -= 0.5 * t * ti.min(self.g_mu * pen / ti.max(tl, 1e-12), 1.0)
-                        elif ti.static(self.g_coh > 0):
-                            dx -= 0.5 * self.g_coh * (d - D) * nrm
+        self.grid.for_neighbours(i, self.slot_kind, 1, self._granular_pair, (xi, di, h, dx))
         return GRANULAR_RELAX * dx
 
     @ti.func
+    def _granular_pair(self, j, xi, di, h, dx: ti.template()):
+        """Grain j's contact with the grain at xi (displaced by di over the step), added into dx."""
+        S = self.state
+        D, reach2 = self.g_d, self.g_reach * self.g_reach
+        r = xi - S.particle_pos[j]
+        d2 = r.dot(r)
+        if 0.0 < d2 < reach2:
+            d = ti.sqrt(d2)
+            nrm = r / d
+            if d < D:
+                pen = D - d
+                dx += 0.5 * pen * nrm
+                rel = di - (h * S.particle_vel[j] + self.corr[j])
+                t = rel - rel.dot(nrm) * nrm
+                tl = t.norm()
+                # static below μ·pen: all of t removed; kinetic: scaled to μ·pen
+                dx -= 0.5 * t * ti.min(self.g_mu * pen / ti.max(tl, 1e-12), 1.0)
+            elif ti.static(self.g_coh > 0):
+                dx -= 0.5 * self.g_coh * (d - D) * nrm
+
+    @ti.func
     def _repel(self, i):
-        S, G = self.state, self.grid
-        xi = S.particle_pos[i]
+        xi = self.state.particle_pos[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
-        c = G.slot_cell[i]
-        for n in range(27):
-            cc = G.neighbour_cell(c, n)
-            b = G.bucket(cc)
-            for k in range(G.start[b], G.start[b + 1]):
-                j = G.sorted[k]
-                if j != i and self.slot_kind[j] == 4 and (G.slot_cell[j] == cc).all():
-                    r = xi - S.particle_pos[j]
-                    d2 = r.dot(r)
-                    if 0.0 < d2 < self.r_d * self.r_d:
-                        d = ti.sqrt(d2)
-                        dx += 0.5 * REPEL * (self.r_d - d) / d * r
+        self.grid.for_neighbours(i, self.slot_kind, 4, self._repel_pair, (xi, dx))
         return dx
+
+    @ti.func
+    def _repel_pair(self, j, xi, dx: ti.template()):
+        r = xi - self.state.particle_pos[j]
+        d2 = r.dot(r)
+        if 0.0 < d2 < self.r_d * self.r_d:
+            d = ti.sqrt(d2)
+            dx += 0.5 * REPEL * (self.r_d - d) / d * r
 
     @ti.func
     def _fluid_lambda(self, i):
         """λ_i = −C_i / (Σ_k |∇_k C_i|² + ε) (Macklin & Müller 2013, eqs. 1, 8–11)."""
-        S, G = self.state, self.grid
-        xi = S.particle_pos[i]
+        xi = self.state.particle_pos[i]
         rho = self._w(0.0)
         gi = ti.Vector([0.0, 0.0, 0.0])
         sq = 0.0
-        c = G.slot_cell[i]
-        for n in range(27):
-            cc = G.neighbour_cell(c, n)
-            b = G.bucket(cc)
-            for k in range(G.start[b], G.start[b + 1]):
-                j = G.sorted[k]
-                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
-                    r = xi - S.particle_pos[j]
-                    d2 = r.dot(r)
-                    if d2 < self.f_h * self.f_h:
-                        rho += self._w(d2)
-                        g = self._gw(r, ti.sqrt(d2)) / self.f_rho0
-                        gi += g
-                        sq += g.dot(g)
+        self.grid.for_neighbours(i, self.slot_kind, 2, self._density_pair, (xi, rho, gi, sq))
         C = ti.max(rho / self.f_rho0 - 1.0, 0.0)
         return -C / (sq + gi.dot(gi) + self.f_eps)
 
     @ti.func
+    def _density_pair(self, j, xi, rho: ti.template(), gi: ti.template(), sq: ti.template()):
+        """Fluid slot j's share of the density at xi (rho), of ∇_i C (gi) and of Σ|∇_j C|² (sq)."""
+        r = xi - self.state.particle_pos[j]
+        d2 = r.dot(r)
+        if d2 < self.f_h * self.f_h:
+            rho += self._w(d2)
+            g = self._gw(r, ti.sqrt(d2)) / self.f_rho0
+            gi += g
+            sq += g.dot(g)
+
+    @ti.func
     def _fluid_delta(self, i):
         """Δp_i = (1/ρ₀) Σ_j (λ_i + λ_j + s_corr) ∇W(p_i − p_j) (eq. 14; s_corr eq. 13)."""
-        S, G = self.state, self.grid
-        xi = S.particle_pos[i]
+        xi = self.state.particle_pos[i]
         li = self.lam[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
-        c = G.slot_cell[i]
-        for n in range(27):
-            cc = G.neighbour_cell(c, n)
-            b = G.bucket(cc)
-            for k in range(G.start[b], G.start[b + 1]):
-                j = G.sorted[k]
-                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
-                    r = xi - S.particle_pos[j]
-                    d2 = r.dot(r)
-                    if 0.0 < d2 < self.f_h * self.f_h:
-                        q = self._w(d2) / self.f_wdq
-                        s_corr = -self.f_scorr * q ** S_CORR_N
-                        dx += (li + self.lam[j] + s_corr) * self._gw(r, ti.sqrt(d2))
+        self.grid.for_neighbours(i, self.slot_kind, 2, self._delta_pair, (xi, li, dx))
         return dx / self.f_rho0
+
+    @ti.func
+    def _delta_pair(self, j, xi, li, dx: ti.template()):
+        r = xi - self.state.particle_pos[j]
+        d2 = r.dot(r)
+        if 0.0 < d2 < self.f_h * self.f_h:
+            q = self._w(d2) / self.f_wdq
+            s_corr = -self.f_scorr * q ** S_CORR_N
+            dx += (li + self.lam[j] + s_corr) * self._gw(r, ti.sqrt(d2))
 
     @ti.kernel
     def sweep(self, h: ti.f32):
@@ -342,33 +330,12 @@ class Interactions:
     def _fluid_velocity(self, i, h):
         """XSPH (eq. 17, normalised by ρ₀), vorticity confinement (eq. 16: ε (N × ω), ε in m/s) and
         Akinci's cohesion (γ in m/s² at the kernel's peak) for fluid slot i; the new velocity."""
-        S, G = self.state, self.grid
+        S = self.state
         xi, vi, wi = S.particle_pos[i], S.particle_vel[i], self.omega[i]
         xs = ti.Vector([0.0, 0.0, 0.0])
         eta = ti.Vector([0.0, 0.0, 0.0])
         st = ti.Vector([0.0, 0.0, 0.0])
-        hk = self.f_h
-        c = G.slot_cell[i]
-        for n in range(27):
-            cc = G.neighbour_cell(c, n)
-            b = G.bucket(cc)
-            for k in range(G.start[b], G.start[b + 1]):
-                j = G.sorted[k]
-                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
-                    r = xi - S.particle_pos[j]
-                    d2 = r.dot(r)
-                    if 0.0 < d2 < hk * hk:
-                        d = ti.sqrt(d2)
-                        xs += (S.particle_vel[j] - vi) * self._w(d2)
-                        if ti.static(self.f_vort > 0):
-                            eta += (self.omega[j].norm() - wi.norm()) * self._gw(r, d)
-                        if ti.static(self.f_tension > 0):
-                            cr = 0.0
-                            if 2.0 * d > hk:
-                                cr = (hk - d) ** 3 * d ** 3
-                            else:
-                                cr = 2.0 * (hk - d) ** 3 * d ** 3 - hk ** 6 / 64.0
-                            st -= (32.0 / (math.pi * hk ** 9) * cr / self.f_cmax) * (r / d)
+        self.grid.for_neighbours(i, self.slot_kind, 2, self._velocity_pair, (xi, vi, wi, xs, eta, st))
         v = vi + self.f_visc * xs / self.f_rho0
         if ti.static(self.f_vort > 0):
             en = eta.norm()
@@ -379,23 +346,42 @@ class Interactions:
         return v
 
     @ti.func
+    def _velocity_pair(self, j, xi, vi, wi, xs: ti.template(), eta: ti.template(), st: ti.template()):
+        """Fluid slot j's terms for the slot at xi (velocity vi, vorticity wi): XSPH into xs, the
+        vorticity's gradient into eta, Akinci's cohesion into st."""
+        S = self.state
+        hk = self.f_h
+        r = xi - S.particle_pos[j]
+        d2 = r.dot(r)
+        if 0.0 < d2 < hk * hk:
+            d = ti.sqrt(d2)
+            xs += (S.particle_vel[j] - vi) * self._w(d2)
+            if ti.static(self.f_vort > 0):
+                eta += (self.omega[j].norm() - wi.norm()) * self._gw(r, d)
+            if ti.static(self.f_tension > 0):
+                cr = 0.0
+                if 2.0 * d > hk:
+                    cr = (hk - d) ** 3 * d ** 3
+                else:
+                    cr = 2.0 * (hk - d) ** 3 * d ** 3 - hk ** 6 / 64.0
+                st -= (32.0 / (math.pi * hk ** 9) * cr / self.f_cmax) * (r / d)
+
+    @ti.func
     def _vorticity(self, i):
         """ω_i = Σ_j v_ij × ∇_j W(p_i − p_j) / ρ₀ (eq. 15), 1/s."""
-        S, G = self.state, self.grid
+        S = self.state
         xi, vi = S.particle_pos[i], S.particle_vel[i]
         w = ti.Vector([0.0, 0.0, 0.0])
-        c = G.slot_cell[i]
-        for n in range(27):
-            cc = G.neighbour_cell(c, n)
-            b = G.bucket(cc)
-            for k in range(G.start[b], G.start[b + 1]):
-                j = G.sorted[k]
-                if j != i and self.slot_kind[j] == 2 and (G.slot_cell[j] == cc).all():
-                    r = xi - S.particle_pos[j]
-                    d2 = r.dot(r)
-                    if 0.0 < d2 < self.f_h * self.f_h:
-                        w += (S.particle_vel[j] - vi).cross(-self._gw(r, ti.sqrt(d2)))
+        self.grid.for_neighbours(i, self.slot_kind, 2, self._vorticity_pair, (xi, vi, w))
         return w / self.f_rho0
+
+    @ti.func
+    def _vorticity_pair(self, j, xi, vi, w: ti.template()):
+        S = self.state
+        r = xi - S.particle_pos[j]
+        d2 = r.dot(r)
+        if 0.0 < d2 < self.f_h * self.f_h:
+            w += (S.particle_vel[j] - vi).cross(-self._gw(r, ti.sqrt(d2)))
 
     @ti.func
     def _gravity(self, i):

@@ -50,27 +50,26 @@ class SelfCollision:
                 found = 1
         return found
 
+    @ti.func
+    def _contact(self, j, i, xi, wi, dx: ti.template()):
+        """Node j's push on node i (at xi, inverse mass wi > 0) when closer than d and unjoined,
+        added into dx."""
+        r = xi - self.state.node_pos[j]
+        d2 = r.dot(r)
+        if 0 < d2 < self.d * self.d:
+            if self._joined(i, j) == 0:
+                d = ti.sqrt(d2)
+                dx += wi / (wi + self.model.node_inv_mass[j]) * (self.d - d) / d * r
+
     @ti.kernel
     def sweep(self):
-        M, S, G = self.model, self.state, self.grid
+        M, S = self.model, self.state
         for i in range(self.n):
             wi = M.node_inv_mass[i]
             dx = ti.Vector.zero(M.dtype, 3)
             if wi > 0:
                 xi = S.node_pos[i]
-                c = G.slot_cell[i]
-                for m in range(27):
-                    cc = G.neighbour_cell(c, m)
-                    b = G.bucket(cc)
-                    for k in range(G.start[b], G.start[b + 1]):
-                        j = G.sorted[k]
-                        if j != i and (G.slot_cell[j] == cc).all():
-                            r = xi - S.node_pos[j]
-                            d2 = r.dot(r)
-                            if 0 < d2 < self.d * self.d:
-                                if self._joined(i, j) == 0:
-                                    d = ti.sqrt(d2)
-                                    dx += wi / (wi + M.node_inv_mass[j]) * (self.d - d) / d * r
+                self.grid.for_neighbours(i, self.member, 1, self._contact, (i, xi, wi, dx))
             self.delta[i] = RELAX * dx
         for i in range(self.n):
             S.node_pos[i] += self.delta[i]
