@@ -91,9 +91,17 @@ class Coupling:
     t0: float = 0.0
     t1: float = 0.0
     board: Dict[Tuple[str, str], object] = field(default_factory=dict)
+    # published for the next coupling step: what a later system gives an earlier one (particles'
+    # pushes on rigid bodies, which advanced first); the coupler moves it onto the board then
+    later: Dict[Tuple[str, str], object] = field(default_factory=dict)
 
     def put(self, publisher: str, key: str, value) -> None:
         self.board[(publisher, key)] = value
+
+    def put_later(self, publisher: str, key: str, value) -> None:
+        """Publish ``value`` for the next coupling step (a one-step lag: the readers of rule 1
+        that go first have already advanced through this one)."""
+        self.later[(publisher, key)] = value
 
     def get(self, key: str) -> List[Tuple[str, object]]:
         """Every (publisher, value) published under ``key``, in publishing order."""

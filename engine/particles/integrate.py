@@ -132,7 +132,7 @@ class ParticleIntegrator:
             killed = stopped
             if ti.static(self.has_colliders):
                 if ti.static(not self.located):  # (located_step holds contacts itself)
-                    nx, nv, n_in, kill_in, which, nrm, spd = self.colliders.project(x, v, x0, v0, h)
+                    nx, nv, n_in, kill_in, which, nrm, spd = self.colliders.project_for(x, v, x0, v0, h, i)
                     if n_in > 0:
                         if k < 0 or spd > speed:
                             k, lag, xh, nh, speed, dv = which, 0.0, nx, nrm, spd, (nv - v).norm()
