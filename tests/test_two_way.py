@@ -53,6 +53,12 @@ def test_momentum_given_to_the_box_is_the_momentum_the_particles_lost(impacts):
     # hit above the centre moving +x: r × J = (−0.3, 0.15, 0) × (J, 0, 0) points along −z
     w = s.rigid.state.w[0]
     assert w[2] < 0.0 and abs(w[2]) > 10 * max(abs(w[0]), abs(w[1]))
+    # a reset scene (nothing pending on the board, records empty) gives the same bytes again
+    first = [a.tobytes() for a in (s.rigid.state.x, s.rigid.state.q, s.rigid.state.v, s.rigid.state.w)]
+    s.reset()
+    for _ in range(45):
+        s.advance_frame()
+    assert [a.tobytes() for a in (s.rigid.state.x, s.rigid.state.q, s.rigid.state.v, s.rigid.state.w)] == first
 
 
 @pytest.mark.slow  # (the ball's case below runs by default)

@@ -125,7 +125,9 @@ class ParticleIntegrator:
     @ti.func
     def finish(self, i, x0, v0, x_end, v_end, t_end, h, k_hit, lag_hit, x_hit, n_hit, s_hit, dv_hit, stopped):
         """Accept particle i's step ending at t_end: hold contacts (the colliders' projection),
-        record the step's fastest impact (the located one, or a projection's), age and retire."""
+        record the step's fastest impact (the located one, or a projection's), age and retire.
+        With two-way coupling the projection records slot i's pushes on rigid bodies
+        (engine.particles.push; the located step records its own)."""
         S = self.state
         x, v, k, lag, xh, nh, speed, dv = x_end, v_end, k_hit, lag_hit, x_hit, n_hit, s_hit, dv_hit
         if is_finite(x.sum() + v.sum()):
