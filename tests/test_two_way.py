@@ -186,3 +186,22 @@ def test_two_way_refused_on_the_command_line_with_exit_2(tmp_path):
                        cwd=root, env=dict(os.environ, TI_SKIP_VERSION_CHECK="ON", PYTHONPATH=root), timeout=120)
     assert r.returncode == 2
     assert "bad.toml: emitters[0].two_way: true needs rigid_bodies to push (the scene has none)" in r.stdout + r.stderr
+
+
+@pytest.mark.slow  # two compiles: the scene, and its rebuild with the pushing emitter
+def test_a_two_way_emitter_added_from_code_rebuilds_the_scene_and_pushes():
+    """A scene built without two-way coupling cannot take a two_way emitter in place (no push
+    records were compiled): ``add_emitter`` says why and rebuilds, and the new jet pushes."""
+    from engine.api import ParticleScene
+
+    data = jet(two_way=False)
+    data["emitters"][0]["position"] = [-2.0, 5.0, 0.0]  # (the first jet misses the box)
+    s = ParticleScene(data, render=False)
+    s.add_emitter({"name": "hose", "position": [-2.0, 0.0, 0.0], "direction": [1.0, 0.0, 0.0],
+                   "speed": [4.0, 4.0], "rate": 300.0, "lifetime": 10.0, "two_way": True, "mass": MASS})
+    assert "two_way" in s.last_add
+    for _ in range(30):
+        s.step(1 / 30)
+    v = s.rigid_state("box")["velocity"]
+    assert v[0] > 0.0 and abs(v[1]) < 1e-6 * v[0]
+    s.close()
