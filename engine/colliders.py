@@ -128,6 +128,9 @@ class Colliders:
     """
 
     offset = 0.0
+    # two-way coupling (engine.particles.push.Pusher): set by a particle system whose emitters
+    # push rigid bodies, before its kernels compile; a view (soft bodies) never has one
+    pusher = None
 
     def __init__(self, specs: Sequence[ColliderSpec], dtype=ti.f32):
         self.specs = list(specs)
@@ -452,6 +455,27 @@ class Colliders:
         the rounding band) it may rest (:meth:`respond` with the step's velocity change), so
         contact at rest is held while a point arriving from outside always bounces. Returns (x',
         v', hits, killed, last shape touched (−1: none), its normal, the impact speed there)."""
+        return self.project_for(x, v, x0, v0, h, -1)
+
+    def pushes_on(self, k) -> bool:
+        """Whether a response against shape k is recorded for two-way coupling: a pusher is set
+        and k is a rigid body's shape (k None: the projected shapes, all of them bodies')."""
+        return self.pusher is not None and (k is None or self.owners[k] == "rigid")
+
+    @ti.func
+    def push_event(self, k: ti.template(), i, x, dv, lag):
+        """Particle slot i changed velocity by ``dv`` (m/s) meeting shape k at x, ``lag`` s
+        before the step's end: recorded for the body owning k (``pusher``, two-way coupling;
+        nothing is compiled without one or for a config's collider)."""
+        if ti.static(self.pushes_on(k)):
+            p = self.collider_point[k] - self.collider_vel[k] * lag  # the body's centre then
+            self.pusher.add(i, ti.static(self.specs[k].owner_index), x - p, dv)
+
+    @ti.func
+    def project_for(self, x, v, x0, v0, h, i):
+        """:meth:`project` for particle slot i (−1: none): with a ``pusher`` (two-way coupling,
+        engine.particles.push) each response against a rigid body's shape is recorded for slot
+        i as the velocity change it gave and its moment about the body's centre."""
         killed, hits, which = 0, 0, -1
         n_hit = ti.Vector([0.0, 1.0, 0.0], dt=self.dtype)
         speed = ti.cast(0.0, self.dtype)
@@ -464,7 +488,9 @@ class Colliders:
                     killed = 1
                 g0, _gd0, _N0 = self.contact(k, x0, v0, h)
                 dv = v - v0 if g0 <= self._band(x0) else zero
+                v_in = v
                 x, v, speed, n_hit = self._reflect(k, x, v, 0.0, dv, g, N)
+                self.push_event(k, i, x, v - v_in, 0.0)
                 which = k
         if ti.static(self.event_count < self.count):  # the projected shapes, in a run-time loop
             for j in range(self.event_count, self.count):
@@ -478,8 +504,11 @@ class Colliders:
                         dv = v - v0 if g0 <= self._band(x0) else zero
                         x = x - g * N
                         vc = self.collider_vel[j] + self.collider_omega[j].cross(x - p)
+                        v_in = v
                         x, v, speed, n_hit = self._bounce(x, v, vc, self.collider_restitution[j],
                                                           self.collider_friction[j], dv, N)
+                        if ti.static(self.pushes_on(None)):  # (every projected shape is a body's)
+                            self.pusher.add(i, self.pusher.body_of[j], x - p, v - v_in)
                         which = j
         return x, v, hits, killed, which, n_hit, speed
 

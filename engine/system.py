@@ -17,7 +17,9 @@ same way; see ``../shared/ARCHITECTURE.md``). The contract, in numbered rules (s
    a non-finite state. It reads no other system's fields.
 3. ``receive(coupling)`` runs before ``advance`` and ``publish(coupling)`` after it, once per
    coupling step: the :class:`Coupling` board carries what one system gives the others (shape
-   poses over the step, impulses in integer fixed point, pin targets). A system that neither
+   poses over the step, impulses summed in a fixed order, pin targets). What a later system
+   gives an earlier one (particles pushing the rigid bodies, which advanced first) is published
+   with ``put_later`` and read in the next coupling step: a one-step lag. A system that neither
    gives nor takes leaves both as the defaults of :class:`SystemBase`.
 4. ``coupled`` (bool): whether it needs coupling steps shorter than a frame (two systems that
    exchange data inside a frame). With nothing coupled the coupling step is the frame, so a scene
@@ -85,15 +87,26 @@ class SystemBase:
 class Coupling:
     """The board systems exchange data on inside a coupling step [t0, t1]. ``board`` maps a
     (publisher name, key) pair to what it published; a reader takes what it knows by key.
-    Impulses are summed in integer fixed point by their receiver (no float atomics: the sum does
-    not depend on thread timing)."""
+    Impulses are never summed by float atomics: each contributor keeps its own record (one
+    writer) and the records are reduced in a fixed order — particles' pushes on rigid bodies per
+    pool slot, summed on the host in slot order in float64 (engine.particles.push) — so the sum
+    does not depend on thread timing. ``later``: what :meth:`put_later` published for the next
+    coupling step (the coupler moves it onto ``board`` then)."""
 
     t0: float = 0.0
     t1: float = 0.0
     board: Dict[Tuple[str, str], object] = field(default_factory=dict)
+    # published for the next coupling step: what a later system gives an earlier one (particles'
+    # pushes on rigid bodies, which advanced first); the coupler moves it onto the board then
+    later: Dict[Tuple[str, str], object] = field(default_factory=dict)
 
     def put(self, publisher: str, key: str, value) -> None:
         self.board[(publisher, key)] = value
+
+    def put_later(self, publisher: str, key: str, value) -> None:
+        """Publish ``value`` for the next coupling step (a one-step lag: the readers of rule 1
+        that go first have already advanced through this one)."""
+        self.later[(publisher, key)] = value
 
     def get(self, key: str) -> List[Tuple[str, object]]:
         """Every (publisher, value) published under ``key``, in publishing order."""

@@ -197,6 +197,10 @@ class Emitter(Strict):
     # "local": live particles are carried with the emitter's motion (a jet on a moving ship)
     space: Literal["world", "local"] = "world"
     interact: Optional[Interact] = None  # particles of emitters of one kind interact (Interact)
+    # two-way coupling: its particles push the rigid bodies they hit back (README "Coupling"),
+    # each with `mass` kg (ignored without two_way)
+    two_way: bool = False
+    mass: Annotated[float, Field(gt=0, le=1e3)] = 1e-3
 
     @model_validator(mode="after")
     def _check(self):
@@ -577,6 +581,24 @@ def _check_interact(emitters, slots):
     return problems
 
 
+def _check_two_way(scene):
+    """A two_way emitter needs rigid bodies to push, fixed steps (a step-doubling attempt may be
+    retried: its pushes would count twice) and no interact (the constraint solve's own
+    projections are not recorded)."""
+    problems = []
+    for i, em in enumerate(scene.emitters):
+        if not em.two_way:
+            continue
+        key = ("emitters", i, "two_way")
+        if not scene.rigid_bodies:
+            problems.append((key, "true needs rigid_bodies to push (the scene has none)"))
+        elif scene.solver.adaptive:
+            problems.append((key, "true needs fixed steps: set solver.adaptive = false"))
+        elif em.interact is not None:
+            problems.append((key, "true is not available with interact (drop one of them)"))
+    return problems
+
+
 class Scene(Strict):
     name: str = ""
     output: Optional[str] = None  # folder under renders/ (default: name); --out overrides
@@ -634,6 +656,7 @@ class Scene(Strict):
                            ("joints", self.joints)):
             problems.append((key, _repeated_names([x.name for x in items])))
         problems += _check_rigid(self)
+        problems += _check_two_way(self)
         if self.frames is None and self.duration is not None and self.frame_count > MAX_FRAMES:
             problems.append(("duration", f"{self.duration:g} s at fps {self.fps:g} is "
                              f"{self.frame_count:,} frames; at most {MAX_FRAMES:,}"))

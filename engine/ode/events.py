@@ -234,6 +234,24 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
         return tau
 
     clear = clear_of(events, dtype)
+    # two-way coupling (engine.particles.push): an event set with a ``pusher`` records, per
+    # point i, the velocity change each response against a rigid body's shape gave; without
+    # one the plain projection is compiled, as before
+    pushes = getattr(events, "pusher", None) is not None
+
+    @ti.func
+    def pushed(k: ti.template(), i, x, dv, lag):
+        if ti.static(pushes):
+            events.push_event(k, i, x, dv, lag)
+
+    if pushes:
+        @ti.func
+        def held(i, x, v, x0, v0, s):
+            return events.project_for(x, v, x0, v0, s, i)
+    else:
+        @ti.func
+        def held(i, x, v, x0, v0, s):
+            return events.project(x, v, x0, v0, s)
 
     @ti.func
     def run(y, t, h, i, atol, rtol, tol_g):
@@ -289,6 +307,7 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
                         if a_n < 0.0:
                             dv_rest = acc * ti.sqrt(2.0 * tol_g / -a_n)
                         xr, vr, speed, N = events.respond(k, xe, ve, lag, dv_rest)
+                        pushed(k, i, xr, vr - ve, lag)
                         if speed > rec_speed:
                             rec_k, rec_lag, rec_x, rec_n = k, lag, xr, N
                             rec_speed, rec_dv = speed, (vr - ve).norm()
@@ -326,7 +345,7 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False):
         if stopped == 0:  # contact held: the event set's projection from the last piece's start
             # (a point that rested at its last event and sank back in under gravity is held
             # there, not bounced with the speed it gained inside)
-            xp, vp, hits, kill, which, nrm, spd = events.project(point(yb), velocity(yb), point(ya), velocity(ya), h - s)
+            xp, vp, hits, kill, which, nrm, spd = held(i, point(yb), velocity(yb), point(ya), velocity(ya), h - s)
             if hits > 0:
                 if rec_k < 0:  # a held contact is reported (at the step's end) when none was located
                     rec_k, rec_lag, rec_x, rec_n = which, ti.cast(0.0, dtype), xp, nrm

@@ -125,14 +125,16 @@ class ParticleIntegrator:
     @ti.func
     def finish(self, i, x0, v0, x_end, v_end, t_end, h, k_hit, lag_hit, x_hit, n_hit, s_hit, dv_hit, stopped):
         """Accept particle i's step ending at t_end: hold contacts (the colliders' projection),
-        record the step's fastest impact (the located one, or a projection's), age and retire."""
+        record the step's fastest impact (the located one, or a projection's), age and retire.
+        With two-way coupling the projection records slot i's pushes on rigid bodies
+        (engine.particles.push; the located step records its own)."""
         S = self.state
         x, v, k, lag, xh, nh, speed, dv = x_end, v_end, k_hit, lag_hit, x_hit, n_hit, s_hit, dv_hit
         if is_finite(x.sum() + v.sum()):
             killed = stopped
             if ti.static(self.has_colliders):
                 if ti.static(not self.located):  # (located_step holds contacts itself)
-                    nx, nv, n_in, kill_in, which, nrm, spd = self.colliders.project(x, v, x0, v0, h)
+                    nx, nv, n_in, kill_in, which, nrm, spd = self.colliders.project_for(x, v, x0, v0, h, i)
                     if n_in > 0:
                         if k < 0 or spd > speed:
                             k, lag, xh, nh, speed, dv = which, 0.0, nx, nrm, spd, (nv - v).norm()

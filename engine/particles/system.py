@@ -54,6 +54,15 @@ class ParticleSystem(SystemBase):
         self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state, rows)
         self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control, rows)
         self.colliders = colliders
+        # two-way coupling (engine.particles.push): per-slot push records, compiled into the
+        # step only where some emitter is two_way (the table's pusher is None otherwise)
+        self.pusher = None
+        if any(e.two_way for e in cfg.emitters) and colliders is not None and colliders.count:
+            from .push import Pusher
+
+            self.pusher = Pusher(self.layout.capacity, colliders, self._masses(cfg.emitters, rows))
+        if colliders is not None:
+            colliders.pusher = self.pusher
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), colliders,
                                              self.method, self.adaptive, sol.extrapolate,
                                              events=self.emitters.uses_events, contacts=contacts,
@@ -99,6 +108,32 @@ class ParticleSystem(SystemBase):
             raise SimulationDiverged(self.label, self.method, e.h, t,
                                      f"potential {name!r} (add_potential) has a non-finite gradient at a "
                                      f"particle's position (the particle was removed)") from None
+
+    # -- two-way coupling (engine.particles.push) ---------------------------------------------------
+    @staticmethod
+    def _masses(emitters, rows: int) -> np.ndarray:
+        """kg per particle of each emitter row: its ``mass`` where it is two_way, else 0."""
+        m = np.zeros(max(1, rows))
+        for e, em in enumerate(emitters):
+            m[e] = em.mass if em.two_way else 0.0
+        return m
+
+    def receive(self, coupling) -> None:
+        """Start the coupling step's push records empty (two-way coupling only)."""
+        if self.pusher is not None:
+            self.pusher.clear()
+
+    def publish(self, coupling) -> None:
+        """The impulses this coupling step's particles gave the rigid bodies, summed in slot
+        order (:meth:`~engine.particles.push.Pusher.impulses`), put on the board for the next
+        coupling step as ``rigid_impulses``: (J, L) float64 (bodies, 3), N·s and N·m·s about each
+        body's centre. The rigid bodies advanced first this step (rule 1), so they take it at
+        the start of the next one: a one-step lag."""
+        if self.pusher is None or not self.layout.capacity:
+            return
+        got = self.pusher.impulses(self.state.particle_emitter.to_numpy(), len(self.cfg.rigid_bodies))
+        if got is not None:
+            coupling.put_later(self.name, "rigid_impulses", got)
 
     # -- the driver's protocol (engine.ode.driver) -----------------------------------------------
     def _move_colliders(self, t: float, t_end: float) -> bool:
@@ -223,6 +258,8 @@ class ParticleSystem(SystemBase):
             return f"its pool needs {need:,} slots, {self.layout.spare:,} spare"
         if any(e.sub_emitters for e in new):
             return "it has sub-emitters"
+        if any(e.two_way for e in new) and self.pusher is None:
+            return "it pushes rigid bodies (two_way) and the scene was built without two-way coupling"
         if any(e.interact is not None for e in new):
             return "it interacts (the interactions are built with the scene)"
         if not self.forces.covers(cfg.forces, cfg.emitters):
@@ -237,6 +274,8 @@ class ParticleSystem(SystemBase):
             self.layout.take(size)
         self.emitters.set_configs(cfg.emitters)
         self.forces.set_emitters(cfg.emitters)
+        if self.pusher is not None:
+            self.pusher.masses = self._masses(cfg.emitters, self.emitters.count)
         self.cfg = cfg
 
     def reset(self) -> None:
@@ -246,7 +285,11 @@ class ParticleSystem(SystemBase):
             self.layout.drop_after(len(self._built.emitters))
             self.emitters.set_configs(self._built.emitters)
             self.forces.set_emitters(self._built.emitters)
+            if self.pusher is not None:
+                self.pusher.masses = self._masses(self._built.emitters, self.emitters.count)
             self.cfg = self._built
+        if self.pusher is not None:
+            self.pusher.clear()
         clear_pool(self.state)
         self.emitters.reset()
         I = self.integrator

@@ -122,6 +122,32 @@ class RigidSystem(SystemBase):
 
         return Contacts.empty(names)
 
+    def receive(self, coupling) -> None:
+        """Take the impulses particles of ``two_way`` emitters gave the bodies over the previous
+        coupling step (``rigid_impulses``: (J, L) float64 (bodies, 3), N·s and N·m·s about each
+        body's centre; engine.particles.push), in publishing order, before this step's advance:
+        a one-step lag. Each pushed body is woken (:meth:`apply_push`)."""
+        pushed = False
+        for _publisher, (J, L) in coupling.get("rigid_impulses"):
+            for i in np.flatnonzero(np.any(J != 0.0, axis=1) | np.any(L != 0.0, axis=1)):
+                pushed |= self.apply_push(int(i), J[i], L[i], load=False)
+        if pushed and self.ode is not None:
+            self.ode.load()  # (once for every body pushed)
+
+    def apply_push(self, i: int, J, L, load: bool = True) -> bool:
+        """Body i takes the impulse J (N·s, at its centre) and the angular impulse L (N·m·s,
+        world frame, about its centre): Δv = J/M, Δω = I_world⁻¹ L (Baraff: ΔP = J, ΔL = L);
+        a fixed or path-following body takes nothing. Wakes it. Whether it moved."""
+        m, S = self.model, self.state
+        if not m.dynamic[i]:
+            return False
+        S.v[i] += np.asarray(J, np.float64) * m.body_inv_mass[i]
+        S.w[i] += m.inv_inertia_world(S.q[i], i, np.asarray(L, np.float64))
+        self.wake(i)
+        if load and self.ode is not None:
+            self.ode.load()
+        return True
+
     def publish(self, coupling) -> None:
         """The bodies' shapes at the step's end, for particles and soft bodies (sphere, box and
         capsule poses with their velocities): :meth:`shapes`; the bodies' own shapes in the one shape

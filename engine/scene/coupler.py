@@ -46,12 +46,18 @@ class Coupler:
         for a, b in self.steps(t0, t1):
             c.t0, c.t1 = a, b
             c.board.clear()
+            c.board.update(c.later)  # what the previous coupling step published for this one
+            c.later.clear()
             for s in self.systems:
                 s.receive(c)
                 s.advance(a, b)
                 s.publish(c)
 
-    def reset(self) -> None:
+    def clear(self) -> None:
+        """Forget what the board holds for the next coupling step (a reset scene starts clean)."""
         self.coupling = Coupling()
+
+    def reset(self) -> None:
+        self.clear()
         for s in self.systems:
             s.reset()

@@ -187,6 +187,7 @@ class Scene:
             if self.renderer is not None and self.particles is not None:
                 self.renderer.look.update(self._built.emitters)
         self.t, self.frame = 0.0, 0
+        self.coupler.clear()  # (impulses published for the next coupling step are dropped)
         self.stats.__dict__.update(Stats().__dict__)  # (the drivers hold this object)
         self.control.restart(self.cfg, self.colliders.specs)
         self.colliders.reset()
