@@ -53,7 +53,7 @@ def _cmd_ode(args) -> int:
 
 ARCH_CHOICES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
 PROBLEM_NAMES = ("growth", "decay", "oscillator", "projectile_drag", "damped_spring",
-                 "lotka-volterra", "kepler", "kepler-0.6", "arenstorf")
+                 "lotka-volterra", "kepler", "kepler-0.6", "arenstorf", "tumbling")
 T = flags.argtype
 THREADS = flags.integer(1, 1024)
 
