@@ -46,6 +46,17 @@ def time_median(fn, repeats: int, warmup: int = 1, taichi: bool = True) -> float
     return statistics.median(times)
 
 
+def frame_seconds(scene, frames: int) -> float:
+    """Mean wall seconds of ``frames`` frames of ``scene`` stepped and rendered (after one frame
+    rendered outside the timing: the renderer's first call compiles)."""
+    scene.render()
+    t0 = time.perf_counter()
+    for _ in range(frames):
+        scene.advance_frame()
+        scene.render()
+    return (time.perf_counter() - t0) / frames
+
+
 def format_table(rows) -> str:
     lines = []
     section = None

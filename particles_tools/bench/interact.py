@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-from .common import Row, time_median
+from .common import Row, frame_seconds, time_median
 
 N_FULL, N_QUICK = 100_000, 10_000
 R = 0.01  # grain radius, m
@@ -163,8 +163,6 @@ def grid_rows(n: int, repeats: int):
 def config_rows(quick: bool):
     """Each shipped config at 1280×720: step + render per frame, averaged over a stretch where its
     particles are alive (after 1 s), and the live count."""
-    import time
-
     from engine.config.load import load_config
     from engine.scene import Scene
 
@@ -177,13 +175,7 @@ def config_rows(quick: bool):
         skip = int(cfg.fps * (0.5 if quick else 1.0))
         for _ in range(skip):
             sc.advance_frame()
-        sc.render()
-        frames = 5 if quick else 20
-        t0 = time.perf_counter()
-        for _ in range(frames):
-            sc.advance_frame()
-            sc.render()
-        dt = (time.perf_counter() - t0) / frames
+        dt = frame_seconds(sc, 5 if quick else 20)
         rows.append(Row("interact", f"{name} at 1280x720 (step + render)", 1.0 / dt, "frames/s",
                         f"{sc.live_count():,} particles live"))
     return rows

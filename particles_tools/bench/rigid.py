@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import time
 
-from .common import Row
+from .common import Row, frame_seconds
 
 SECTION = "rigid"
 
@@ -80,13 +80,7 @@ def _shipped(quick: bool):
             continue
         s = Scene(load_config(data), width=W, height=H)
         s.advance_frame()
-        s.render()
-        frames = 5 if quick else 60
-        t0 = time.perf_counter()
-        for _ in range(frames):
-            s.advance_frame()
-            s.render()
-        ms = (time.perf_counter() - t0) / frames * 1e3
+        ms = frame_seconds(s, 5 if quick else 60) * 1e3
         name = os.path.basename(path)[:-5]
         out.append(Row(SECTION, f"{name} (step + render {W}x{H})", ms, "ms/frame",
                        f"{1e3 / ms:.0f} fps; target >= 60 fps"))
