@@ -19,6 +19,7 @@ from ..ode.methods import INTEGRATORS
 from .base import (ColorStop, Finite, Fraction01, Keyframe, Name, NonNeg, Positive, ScalarStop, Strict, Vec3,  # noqa: F401
                    _check_path, _report)
 from ..particles.capacity import MAX_POOL, pool_sizes
+from ..particles.pm import MAX_DIRECT, MAX_MESH
 from .rigid import Joint, Rigid, RigidBody, check_scene as _check_rigid
 
 BODY_INTEGRATORS = (*INTEGRATORS, "xpbd")  # soft bodies may also take XPBD (engine.xpbd)
@@ -100,10 +101,6 @@ class SubEmitter(Strict):
 
 INTERACT_KINDS = ("granular", "fluid", "gravity", "repel")
 MAX_INTERACT_RADIUS = 1.0  # m: a grid cell is 2–4 radii; larger grains belong to rigid bodies
-MAX_DIRECT = 20_000  # gravity slots summed over all pairs at most (method = "direct")
-AUTO_DIRECT = 2_000  # method = "auto": the pair sum up to this many gravity slots, particle–mesh beyond
-# (engine.particles.pm; on two cores the two cost the same near 2,000 slots: ~25 ms a step)
-MAX_MESH = 2_000_000  # gravity slots at most on the particle–mesh path (host arrays of N × 3 float64)
 # keys that mean something for one kind only (a key for another kind is refused, naming its kind)
 _KIND_KEYS = {"friction": "granular", "cohesion": "granular", "G": "gravity", "softening": "gravity", "method": "gravity",
               "mass": "gravity", "viscosity": "fluid", "vorticity": "fluid", "surface_tension": "fluid"}

@@ -35,9 +35,9 @@ import math
 import numpy as np
 import taichi as ti
 
-from ..config.schema import AUTO_DIRECT
 from ..geometry.grid import HashGrid
 from . import pm
+from .pm import AUTO_DIRECT
 
 KINDS = {"granular": 1, "fluid": 2, "gravity": 3, "repel": 4}
 GRID_KINDS = ("granular", "fluid", "repel")

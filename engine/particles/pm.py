@@ -23,6 +23,10 @@ about 10 ms for M = 32 and 30,000 particles on this machine's two cores.
 import numpy as np
 
 CELLS = 32  # grid nodes per axis over the particles' bounding box (the FFTs run on 2·CELLS)
+MAX_DIRECT = 20_000  # gravity slots summed over all pairs at most (method = "direct")
+AUTO_DIRECT = 2_000  # method = "auto": the pair sum up to this many gravity slots, the mesh beyond
+# (on two cores the two cost about the same near 2,000 slots: ~25 ms a step)
+MAX_MESH = 2_000_000  # gravity slots at most on the mesh (host arrays of N × 3 float64)
 
 
 def _cic(x, origin, d, M):
