@@ -75,6 +75,7 @@ BALL = {"name": "ball", "shape": "sphere", "radius": 0.5, "position": [0.0, 0.5,
         "friction": 0.0, "restitution": 0.0}
 
 
+@pytest.mark.slow  # (a scene compile: the default run keeps the momentum test)
 def test_a_jet_drives_a_free_ball_as_the_closed_form_says():
     """Zero gravity, a jet of speed u along +x at a free ball's centre, rate n, mass m each, ball
     mass M, e = 0, no friction: a particle reaching the ball (moving at v) leaves with v, giving
@@ -100,7 +101,8 @@ def test_a_jet_drives_a_free_ball_as_the_closed_form_says():
     assert not s.rigid.state.v[0, 1:].any()
 
 
-@pytest.mark.parametrize("two_way", [pytest.param(True, marks=pytest.mark.slow), False])
+@pytest.mark.slow  # (a scene compile each: the default run keeps the momentum test)
+@pytest.mark.parametrize("two_way", [True, False])
 def test_a_stream_pushes_a_ball_on_a_frictionless_floor_only_when_two_way(two_way):
     """A ball resting on a frictionless floor, a stream along +x at its centre's height: with
     two_way it rolls off along +x (and stays on the floor); without, it does not move at all."""
