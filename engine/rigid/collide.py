@@ -273,8 +273,7 @@ def broad_phase(x, bound, margin):
         counts = hi_ - lo_
         if counts.sum() == 0:
             continue
-        first = np.repeat(np.arange(n), counts)
-        offs = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        first, offs = _runs(counts)
         second = order[np.repeat(lo_, counts) + offs]
         if o == (0, 0, 0):  # the same cell: each pair once
             keep = first < second
@@ -283,13 +282,25 @@ def broad_phase(x, bound, margin):
         seconds.append(second)
     if not firsts:
         return np.zeros((0, 2), np.int64)
-    i, j = np.concatenate(firsts), np.concatenate(seconds)
+    return _overlapping(x, ext, np.concatenate(firsts), np.concatenate(seconds))
+
+
+def _overlapping(x, ext, i, j):
+    """The candidate pairs (i, j) whose spheres of radius ``ext`` around ``x`` overlap, as (min,
+    max) rows sorted by the first, then the second (the broad phase's fixed order)."""
     d = np.linalg.norm(x[i] - x[j], axis=1)
     keep = d <= ext[i] + ext[j]
     p = np.stack([np.minimum(i, j), np.maximum(i, j)], 1)[keep]
     if len(p) == 0:
         return p
     return p[np.lexsort((p[:, 1], p[:, 0]))]
+
+
+def _runs(counts):
+    """(owner, offset) for each element of runs of ``counts`` elements: the flat expansion of
+    per-row candidate ranges."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    return owner, np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
 def sweep_phase(x, bound, margin):
@@ -306,16 +317,9 @@ def sweep_phase(x, bound, margin):
     counts = np.maximum(end - np.arange(n) - 1, 0)
     if counts.sum() == 0:
         return np.zeros((0, 2), np.int64)
-    first = np.repeat(np.arange(n), counts)
-    offs = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    first, offs = _runs(counts)
     second = first + 1 + offs
-    i, j = order[first], order[second]
-    d = np.linalg.norm(x[i] - x[j], axis=1)
-    keep = d <= ext[i] + ext[j]
-    p = np.stack([np.minimum(i, j), np.maximum(i, j)], 1)[keep]
-    if len(p) == 0:
-        return p
-    return p[np.lexsort((p[:, 1], p[:, 0]))]
+    return _overlapping(x, ext, order[first], order[second])
 
 
 def _clip_batch(poly, n, t, h):
