@@ -337,10 +337,42 @@ def test_sparks_bounce_off_a_tilted_rigid_box_and_a_capsule_named_as_the_bodies(
     assert np.median(on_box[:, 0]) < -0.3  # slid down the box's slope, not straight through it
 
 
-def test_the_grid_broad_phase_finds_the_sweeps_pairs_in_the_same_order():
+def test_the_kept_pair_list_gives_the_broad_phases_pairs_at_every_step():
+    # bodies drifting (some fast, some still), margins growing and shrinking, a body jumping far
+    # and a NaN: at every call the kept list gives exactly broad_phase's pairs and order, and it
+    # is rebuilt only now and then (the free-flight case it is for)
+    from engine.rigid import collide
+
+    rng = np.random.default_rng(3)
+    n = 400
+    x = rng.uniform(0.0, 6.0, (n, 3))
+    v = rng.normal(size=(n, 3)) * np.where(rng.random(n) < 0.2, 2.0, 0.05)[:, None]
+    bound = rng.uniform(0.05, 0.3, n)
+    keep, built = collide.PairList(), 0
+    for step in range(300):
+        x = x + v / 240.0
+        margin = 0.01 + 0.01 * rng.random(n) * (step % 5 == 0)
+        if step == 150:
+            x[7] += 3.0
+        if step == 200:
+            x[9, 0] = np.nan
+        before = keep.x0
+        got = keep.pairs(x, bound, margin)
+        built += keep.x0 is not before
+        assert np.array_equal(got, collide.broad_phase(x, bound, margin)), step
+    assert built < 100  # kept most steps (rebuilt on a far jump, a NaN, or after enough drift)
+
+
+@pytest.mark.parametrize("table", ["dense", "sparse"])
+def test_the_grid_broad_phase_finds_the_sweeps_pairs_in_the_same_order(table, monkeypatch):
     # the broad phase (a uniform grid) gives exactly the sorted sweep's pairs and order, on
-    # clouds, flat layers, coincident bodies and a lattice (where the sweep lists every slab)
+    # clouds, flat layers, coincident bodies and a lattice (where the sweep lists every slab),
+    # through its dense table of cells and through its binary search among occupied cells
+    from engine.rigid import collide
     from engine.rigid.collide import broad_phase, sweep_phase
+
+    if table == "sparse":
+        monkeypatch.setattr(collide, "DENSE_CELLS", -10 ** 9)
 
     rng = np.random.default_rng(0)
     for trial in range(200):

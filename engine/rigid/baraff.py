@@ -133,11 +133,10 @@ class BaraffSystem:
             return
         Y = self.Y.to_numpy()
         y = Y[: m.count]
-        q = y[:, 3:7]
-        R = quat.matrix(q)
         gl = float(np.linalg.norm(self._g))
         pos = own.control.collider_positions(own.t)
         changed = False
+        R = quat.matrix(y[:, 3:7]) if planes else None
         for k, spec in planes:
             nrm = np.asarray(spec.normal, np.float64)
             nrm = nrm / np.linalg.norm(nrm)
@@ -165,7 +164,7 @@ class BaraffSystem:
         penetrations taken out, then CONTACT_SWEEPS sweeps of impulses (module docstring).
         Whether there were any."""
         own, m = self.owner, self.model
-        R = quat.matrix(y[:, 3:7])
+        R = quat.matrix(y[:, 3:7]) if shapes else None  # (else only the pairs' bodies need it)
         # contacts within MARGIN count (a box resting on another keeps all four corners of its
         # manifold, not the one or two that happen to be inside after a step: those alone would
         # rock it); only penetrations are moved
@@ -181,7 +180,7 @@ class BaraffSystem:
                 n.append(cn)
                 e.append(max(m.body_restitution[i], spec.restitution))
                 mu.append(0.5 * (m.body_friction[i] + spec.friction))
-        got = own.pair_contacts(y[:, 0:3], R, margins, m.dynamic) if m.count > 1 else None
+        got = own.pair_contacts(y[:, 0:3], R, margins, m.dynamic, q=y[:, 3:7]) if m.count > 1 else None
         if got is not None:
             i, j, ca, cb, cn = got
             a += i.tolist()

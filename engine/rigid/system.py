@@ -49,6 +49,7 @@ class RigidSystem(SystemBase):
         self.label = f"{name}: {self.method}"
         self.t = 0.0
         self.last_contacts = None
+        self._pair_list = collide.PairList()  # the broad phase's pairs, kept while they hold
         self._meshes = [mesh(self.model.body_shape[i], self.model.body_radius[i], self.model.body_half[i],
                              self.model.body_half_length[i]) for i in range(self.model.count)]
         self._kin = np.flatnonzero(self.model.body_kinematic)
@@ -227,14 +228,15 @@ class RigidSystem(SystemBase):
         geometry = (float(spec.radius), np.asarray(spec.half_extents, np.float64), float(spec.half_length))
         return collide.shape_collider_contacts(self.model, x, R, CODES[spec.kind], p, Rk, geometry, margins, bodies)
 
-    def pair_contacts(self, x, R, margins, moving):
-        """Body–body contacts of bodies at ``x`` (B, 3) turned by ``R`` (B, 3, 3), each grown by
+    def pair_contacts(self, x, R, margins, moving, q=None):
+        """Body–body contacts of bodies at ``x`` (B, 3) turned by ``R`` (B, 3, 3) (or None: made
+        from the unit quaternions ``q`` (B, 4) when some pair needs them), each grown by
         its margin (B,), for pairs with a ``moving`` body (B,) bool, jointed pairs left out: arrays
         (a, b, p_a, p_b, n) (n from b to a), in a fixed order (pair by pair from the broad phase,
         then point); None when there is none. Boxes against boxes by separating axes in one
         batch, other shape pairs one at a time (engine.rigid.collide)."""
         m = self.model
-        pairs = collide.broad_phase(x, m.body_bound, margins)
+        pairs = self._pair_list.pairs(x, m.body_bound, margins)
         if len(pairs):
             keep = moving[pairs[:, 0]] | moving[pairs[:, 1]]
             if self.joints is not None:
@@ -242,6 +244,8 @@ class RigidSystem(SystemBase):
             pairs = pairs[keep]
         if not len(pairs):
             return None
+        if R is None:
+            R = quat.matrix(q)
         boxes = (m.body_shape[pairs[:, 0]] == BOX) & (m.body_shape[pairs[:, 1]] == BOX)
         bb = pairs[boxes]
         k, pa, pb, n = collide.box_box_batch(
