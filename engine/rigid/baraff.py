@@ -18,7 +18,8 @@ the XPBD path (:meth:`RigidSystem.pair_contacts`: boxes by separating axes, the 
 closed form), each penetration taken out along n split by inverse mass (translation only), then
 Baraff's two-body impulse j = −(1 + e) v_rel·n / (k_a + k_b), k = 1/M + n·((I⁻¹(r × n)) × r), with
 Coulomb friction, swept over the contacts in their fixed order (sequential impulses: a stack needs
-several sweeps, CONTACT_SWEEPS). Impacts are not located inside the step (the particles' are).
+several sweeps, CONTACT_SWEEPS). Impacts are located inside the step (:mod:`engine.rigid.locate`):
+the step is ended at the first one, the contacts respond there, and the rest is taken from there.
 e is the larger of the two bodies' restitutions and μ the mean of their frictions, as on the XPBD
 path."""
 # (no __future__ annotations: Taichi reads the funcs' annotations)
@@ -29,7 +30,7 @@ import taichi as ti
 from ..ode.driver import Driver, StepPolicy
 from ..ode.methods import method as ode_method
 from ..ode.steppers import doubling_step, make_step, scaled_error
-from . import collide, quat
+from . import collide, locate, quat
 from .quat import cross
 
 N = 14
@@ -60,6 +61,10 @@ class BaraffSystem:
         self.rtol = solver_cfg.tolerance
         self.atol = solver_cfg.atol if solver_cfg.atol is not None else solver_cfg.tolerance
         self.h = solver_cfg.h
+        # whether the bodies can meet anything (else no step pays for impacts): Y0 is kept by every
+        # step then, for locating impacts inside it (engine.rigid.locate)
+        self.touches = (bool(m.count) and bool(m.dynamic.any()) and (bool(owner.specs) or m.count > 1)
+                        and getattr(solver_cfg, "impacts", "located") == "located")
         self._k = _build(self)
         self.driver = Driver(self, StepPolicy(h=solver_cfg.h, adaptive=solver_cfg.adaptive, rtol=self.rtol,
                                               atol=self.atol), owner.stats)
@@ -105,15 +110,52 @@ class BaraffSystem:
 
     # -- the Driver's protocol -----------------------------------------------------------------
     def fixed_step(self, t0, h, j, n):
-        self._k["step"](t0 + j * h, h)
-        self._contacts(h)
+        t, left = t0 + j * h, h
+        self._k["step"](t, left)
+        Y = None
+        for _ in range(locate.MAX_EVENTS):  # impacts located inside the step (engine.rigid.locate)
+            tau = self.locate(t, left)
+            if tau is None:
+                Y = self._Y1  # (the state the search read: the step's end)
+                break
+            self._k["rollback"]()
+            self._k["step"](t, tau)
+            self._contacts(h, touch=locate.TOUCHING)  # the response, where the impact is
+            t, left = t + tau, left - tau
+            self._k["step"](t, left)
+        self._contacts(h, Y=Y)
         return 1
+
+    def locate(self, t, h):
+        """The time (s after t) of the first impact inside the step just taken from Y0 at t for
+        h, or None (engine.rigid.locate). The state is left at the step's end either way."""
+        self._Y1 = None
+        if not self.touches:
+            return None
+        n = self.n
+        self._Y1 = Y1 = self.Y.to_numpy()
+        stepped = []
+
+        def step_to(tau):
+            self._k["rollback"]()
+            if self.driver.policy.adaptive:
+                self._k["attempt"](t, tau, self.atol, self.rtol)
+            else:
+                self._k["step"](t, tau)
+            stepped.append(tau)
+            return self.Y.to_numpy()[:n]
+
+        tau = locate.locate(self.owner, lambda: self.Y0.to_numpy()[:n], Y1[:n], h, float(np.linalg.norm(self._g)),
+                            step_to)
+        if stepped:
+            self.Y.from_numpy(Y1)
+        return tau
 
     def attempt(self, t, h):
         return float(self._k["attempt"](t, h, self.atol, self.rtol))
 
     def commit(self, t, h):
-        self._contacts(h)
+        self._contacts(h, touch=locate.TOUCHING)  # (a step the driver ended at an impact ends touching)
 
     def rollback(self):
         self._k["rollback"]()
@@ -124,14 +166,17 @@ class BaraffSystem:
         return None
 
     # -- contacts with the scene's planes --------------------------------------------------------
-    def _contacts(self, h: float) -> None:
+    def _contacts(self, h: float, touch: float = 0.0, Y=None) -> None:
+        """The end-of-step response; ``touch`` (m): a point this close above a plane counts as on
+        it (a located impact ends its step touching, a rounding's width either side); ``Y``: the
+        state as already read back, if it was."""
         own, m = self.owner, self.model
         planes = [(k, s) for k, s in enumerate(own.specs) if s.kind == "plane"]
         shapes = [(k, s) for k, s in enumerate(own.specs) if s.kind != "plane"]
         pairs = m.count > 1 and m.dynamic.any()
         if not (planes or shapes or pairs) or m.count == 0:
             return
-        Y = self.Y.to_numpy()
+        Y = self.Y.to_numpy() if Y is None else Y
         y = Y[: m.count]
         gl = float(np.linalg.norm(self._g))
         pos = own.control.collider_positions(own.t)
@@ -140,7 +185,7 @@ class BaraffSystem:
         for k, spec in planes:
             nrm = np.asarray(spec.normal, np.float64)
             nrm = nrm / np.linalg.norm(nrm)
-            idx, pas, pbs = collide.plane_contacts(m, y[:, 0:3], R, pos[k], nrm, np.zeros(m.count),
+            idx, pas, pbs = collide.plane_contacts(m, y[:, 0:3], R, pos[k], nrm, np.full(m.count, touch),
                                                    np.flatnonzero(m.dynamic))
             deepest = {}
             for i, pa, pb in zip(idx.tolist(), pas, pbs):  # one contact per body and plane: the deepest
@@ -287,6 +332,8 @@ def _build(sys: BaraffSystem):
     @ti.kernel
     def step_k(t: dtype, h: dtype):
         for i in range(n):
+            if ti.static(sys.touches):
+                Y0[i] = Y[i]  # (kept for locating an impact inside the step)
             Y[i] = normalised(step(Y[i], t, h, i))
 
     @ti.kernel
