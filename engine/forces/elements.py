@@ -5,7 +5,7 @@ Determinism (PHYSICS.md, "Energy-based models"): each element writes its k gradi
 ``fe[e, s]`` (one writer per slot, no atomics); each node then sums its slots in a fixed order (a
 CSR list of flat slots e·k + s, increasing), as the spring gather does. So the forces are
 bit-identical for any thread count. The XPBD projection sweeps a greedy colouring of the elements
-(engine.xpbd.schedule): no two elements of a colour share a node.
+(engine.geometry.colouring): no two elements of a colour share a node.
 
 Kinds (``KINDS``; k nodes per element; the stiffness given to the group and its unit):
 
@@ -23,7 +23,7 @@ User energies (Taichi autodiff over per-element copies) are :mod:`engine.forces.
 import numpy as np
 import taichi as ti
 
-from ..xpbd.schedule import greedy_colors, schedule
+from ..geometry.colouring import greedy_colors, schedule
 from . import terms
 
 KINDS = {"bending": 4, "area": 3, "volume": 4, "elastic": 4}

@@ -18,7 +18,7 @@ name. The stiffness guard cannot see a user energy's stiffness: choose ``substep
 import numpy as np
 import taichi as ti
 
-from ..xpbd.schedule import greedy_colors, schedule
+from ..geometry.colouring import greedy_colors, schedule
 from .elements import node_slots
 
 

@@ -13,7 +13,7 @@ per-node parameters the model holds two precomputed orderings, both built once i
 import numpy as np
 import taichi as ti
 
-from ..xpbd.schedule import greedy_colors, schedule
+from ..geometry.colouring import greedy_colors, schedule
 from .topology import Topology
 
 

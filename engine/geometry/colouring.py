@@ -1,4 +1,5 @@
-"""The colour schedule: elements (springs, tetrahedra, hinges…) grouped so that no two of one colour
+"""The colour schedule (deterministic graph colouring, used by XPBD, the soft-body models and the
+energy terms; here in the shared geometry room so none of them imports another): elements (springs, tetrahedra, hinges…) grouped so that no two of one colour
 share a node, so a colour is projected in parallel without races and a Gauss–Seidel sweep is the
 same every run (deterministic, no atomics)."""
 import numpy as np
