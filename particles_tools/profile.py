@@ -18,7 +18,7 @@ def _kernel_table():
     prog = impl.get_runtime().prog
     prog.sync_kernel_profiler()
     prog.update_kernel_profiler()
-    out, tasks = {}, {}
+    out = {}
     for rec in prog.get_kernel_profiler_records():
         # a record per offloaded task: "<kernel>_c<id>_<n>_kernel_<k>_<kind>"; sum a kernel's tasks
         m = re.match(r"^(.*?)_c\d+_\d+_kernel_(\d+)", rec.name)

@@ -1,6 +1,5 @@
 """Issue 20: careless users. Each case works, or fails in one line naming the method, argument,
 flag or config key and the value, and a refused call changes nothing."""
-import mmap
 import os
 
 import numpy as np

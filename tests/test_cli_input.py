@@ -2,7 +2,6 @@
 the flag or key and the value, exit 2, no traceback, nothing written. Each case of the issue is a
 row here; the fuzz test (test_config_fuzz.py) covers the flags at random."""
 import json
-import os
 import signal
 import subprocess
 

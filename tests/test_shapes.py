@@ -15,7 +15,7 @@ import pytest
 import taichi as ti
 
 from engine.api import SceneBuilder
-from engine.geometry.shapes import inertia, quat_from_rotvec, quat_mul, signed_distance, spun
+from engine.geometry.shapes import inertia, quat_from_rotvec, signed_distance, spun
 
 G = 9.81
 

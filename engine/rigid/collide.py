@@ -428,7 +428,7 @@ def box_box_batch(xa, Ra, ha, xb, Rb, hb, margin):
     sep_e = np.where(ok, (proj_t - ra - rb) / np.where(ok, norm, 1.0), -np.inf).reshape(K, 9)
     face = np.concatenate([sep_a, sep_b], 1)
     face_best, face_axis = face.max(1), face.argmax(1)
-    edge_best, edge_axis = sep_e.max(1), sep_e.argmax(1)
+    edge_best = sep_e.max(1)
     apart = (face_best > margin) | (edge_best > margin)
     edge = ~apart & (edge_best > face_best + 1e-3 + 0.05 * np.abs(face_best))
     for k in np.flatnonzero(edge):  # few: per pair
