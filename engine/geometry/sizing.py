@@ -6,6 +6,7 @@ BLOCK = 1024  # buckets per block of the two-level prefix scan (engine.geometry.
 MAX_GRID_BYTES = 2 << 30  # 2 GiB for one scene's grids and interaction fields
 # a cell index must fit in 30 bits per axis so that neighbours' indices (±1) never overflow int32
 MAX_CELL_INDEX = 1 << 30
+NEIGHBOURS = 64  # neighbours listed per member slot a step (engine.particles.interact); more: the grid's walk
 
 
 def table_size(capacity: int) -> int:
@@ -26,6 +27,7 @@ def grid_bytes(capacity: int) -> int:
 
 def interact_bytes(capacity: int, fluid: bool) -> int:
     """The grid plus the interaction's own per-slot fields: position and velocity before the
-    solve, the correction and its Jacobi delta (4 × vec3 f32, member flag); fluid adds λ, the
-    vorticity and a velocity buffer (7 f32)."""
-    return grid_bytes(capacity) + capacity * (4 * 12 + 4 + (28 if fluid else 0))
+    solve, the correction and its Jacobi delta (4 × vec3 f32, member flag), the neighbour list
+    (NEIGHBOURS + 1 int32 and where the slot was listed, vec3 f32); fluid adds λ, the vorticity and
+    a velocity buffer (7 f32)."""
+    return grid_bytes(capacity) + capacity * (4 * 12 + 4 + 4 * (NEIGHBOURS + 1) + 12 + (28 if fluid else 0))

@@ -36,6 +36,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry.grid import HashGrid
+from ..geometry.sizing import NEIGHBOURS
 from . import pm
 from .pm import AUTO_DIRECT
 
@@ -48,6 +49,10 @@ GRANULAR_RELAX = 0.5  # Jacobi relaxation: a fixed factor (not 1/contact count: 
 # a bound in the spirit of Macklin et al. 2014's pre-stabilisation (§4.4); resting piles never reach it
 GRANULAR_MAX_SPEED = 0.1
 REPEL = 0.25  # fraction of a repel overlap removed per step (soft)
+# each member's neighbours listed once a step (Macklin & Müller 2013, Algorithm 1: "find
+# neighbouring particles" once, then iterate): the slots of its 27 cells within (1 + SKIN) of the
+# grid's cell, in the grid's order, at most NEIGHBOURS of them (engine.geometry.sizing)
+SKIN = 0.2
 S_CORR_K, S_CORR_DQ, S_CORR_N = 0.1, 0.2, 4  # Macklin & Müller 2013, §4 (k, Δq/h, n)
 FLUID_EPS = 0.01  # λ relaxation ε, as a fraction of the lattice's Σ|∇C|²
 
@@ -147,6 +152,18 @@ class Interactions:
             if self.mesh:
                 self.g_acc = ti.Vector.field(3, ti.f32, shape=n)  # the mesh's accelerations, m/s²
         self.grid = HashGrid(n, cell) if cell > 0 else None
+        if self.grid is not None:
+            # the list (see _listing): the visitors apply their own cut-offs (≤ cell), so a slot
+            # within cell·(1 + SKIN) when listed stays listed while no member has moved SKIN·cell/2
+            self.nbr = ti.field(ti.i32, shape=(n, NEIGHBOURS))
+            self.nnbr = ti.field(ti.i32, shape=n)  # listed neighbours; −1: more than NEIGHBOURS (the grid's walk)
+            self.x_ref = ti.Vector.field(3, ti.f32, shape=n)  # where each member was when listed
+            self.stale = ti.field(ti.i32, shape=())  # a member moved past SKIN·cell/2 since the listing
+            self.unlisted = ti.field(ti.i32, shape=())  # members whose neighbours overflowed the list
+            self.list_limit = ti.field(ti.i32, shape=())  # NEIGHBOURS (a test sets 0: every member walks the grid)
+            self.list_limit[None] = NEIGHBOURS
+            self.l_reach2 = (cell * (1.0 + SKIN)) ** 2
+            self.l_move2 = (0.5 * SKIN * cell) ** 2
 
     # -- per-step entry --------------------------------------------------------------------------
     def step(self, h: float) -> None:
@@ -156,8 +173,13 @@ class Interactions:
             self._mesh_gravity()
         if self.grid is not None:
             self.grid.build(self.state.particle_pos, self.member)
+            self._listing()
             for _ in range(self.iterations):
+                if self.stale[None]:
+                    self._listing()
                 self.sweep(h)
+            if self.stale[None]:
+                self._listing()
         self.finish(h)
 
     def _mesh_gravity(self) -> None:
@@ -173,7 +195,9 @@ class Interactions:
         self.g_acc.from_numpy(acc)
 
     def stats(self) -> dict:
-        return self.grid.stats() if self.grid is not None else {}
+        if self.grid is None:
+            return {}
+        return dict(self.grid.stats(), unlisted=int(self.unlisted[None]))
 
     # -- kernels ---------------------------------------------------------------------------------
     @ti.kernel
@@ -189,6 +213,44 @@ class Interactions:
             self.v_pre[i] = S.particle_vel[i]
             self.corr[i] = ti.Vector([0.0, 0.0, 0.0])
             self.press[i] = 0.0
+
+    @ti.kernel
+    def _listing(self):
+        """Each member's neighbours of its own kind within cell·(1 + SKIN), in the grid's order
+        (so every gather sums the same terms in the same order as walking the grid would: its
+        visitors skip what is beyond their cut-off); past NEIGHBOURS, that member walks the grid
+        (counted in ``unlisted``, never cut)."""
+        S = self.state
+        self.stale[None] = 0
+        self.unlisted[None] = 0
+        for i in range(self.cap):
+            m = 0
+            if self.member[i] != 0:
+                xi = S.particle_pos[i]
+                self.x_ref[i] = xi
+                self.grid.for_neighbours(i, self.slot_kind, self.slot_kind[i], self._list_pair, (i, xi, m))
+                if m > self.list_limit[None]:
+                    m = -1
+                    ti.atomic_add(self.unlisted[None], 1)
+            self.nnbr[i] = m
+
+    @ti.func
+    def _list_pair(self, j, i, xi, m: ti.template()):
+        r = xi - self.state.particle_pos[j]
+        if r.dot(r) < self.l_reach2:
+            if m < NEIGHBOURS:
+                self.nbr[i, m] = j
+            m += 1
+
+    @ti.func
+    def _near(self, i, want, visit: ti.template(), args: ti.template()):
+        """``visit(j, *args)`` for slot i's listed neighbours (or, past the list, for the grid's)."""
+        m = self.nnbr[i]
+        if m >= 0:
+            for k in range(m):
+                visit(self.nbr[i, k], *args)
+        else:
+            self.grid.for_neighbours(i, self.slot_kind, want, visit, args)
 
     @ti.func
     def _w(self, r2):
@@ -212,7 +274,7 @@ class Interactions:
         xi = S.particle_pos[i]
         di = h * S.particle_vel[i] + self.corr[i]  # i's displacement over the step so far
         dx = ti.Vector([0.0, 0.0, 0.0])
-        self.grid.for_neighbours(i, self.slot_kind, 1, self._granular_pair, (xi, di, h, dx))
+        self._near(i, 1, self._granular_pair, (xi, di, h, dx))
         return GRANULAR_RELAX * dx
 
     @ti.func
@@ -240,7 +302,7 @@ class Interactions:
     def _repel(self, i):
         xi = self.state.particle_pos[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
-        self.grid.for_neighbours(i, self.slot_kind, 4, self._repel_pair, (xi, dx))
+        self._near(i, 4, self._repel_pair, (xi, dx))
         return dx
 
     @ti.func
@@ -258,7 +320,7 @@ class Interactions:
         rho = self._w(0.0)
         gi = ti.Vector([0.0, 0.0, 0.0])
         sq = 0.0
-        self.grid.for_neighbours(i, self.slot_kind, 2, self._density_pair, (xi, rho, gi, sq))
+        self._near(i, 2, self._density_pair, (xi, rho, gi, sq))
         C = ti.max(rho / self.f_rho0 - 1.0, 0.0)
         return -C / (sq + gi.dot(gi) + self.f_eps)
 
@@ -279,7 +341,7 @@ class Interactions:
         xi = self.state.particle_pos[i]
         li = self.lam[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
-        self.grid.for_neighbours(i, self.slot_kind, 2, self._delta_pair, (xi, li, dx))
+        self._near(i, 2, self._delta_pair, (xi, li, dx))
         return dx / self.f_rho0
 
     @ti.func
@@ -325,6 +387,8 @@ class Interactions:
                         x = nx
                 S.particle_pos[i] = x
                 self.corr[i] = x - self.x_pre[i]
+                if (x - self.x_ref[i]).norm_sqr() > self.l_move2:
+                    self.stale[None] = 1  # (every writer writes 1: the same in any order)
 
     @ti.func
     def _fluid_velocity(self, i, h):
@@ -335,7 +399,7 @@ class Interactions:
         xs = ti.Vector([0.0, 0.0, 0.0])
         eta = ti.Vector([0.0, 0.0, 0.0])
         st = ti.Vector([0.0, 0.0, 0.0])
-        self.grid.for_neighbours(i, self.slot_kind, 2, self._velocity_pair, (xi, vi, wi, xs, eta, st))
+        self._near(i, 2, self._velocity_pair, (xi, vi, wi, xs, eta, st))
         v = vi + self.f_visc * xs / self.f_rho0
         if ti.static(self.f_vort > 0):
             en = eta.norm()
@@ -372,7 +436,7 @@ class Interactions:
         S = self.state
         xi, vi = S.particle_pos[i], S.particle_vel[i]
         w = ti.Vector([0.0, 0.0, 0.0])
-        self.grid.for_neighbours(i, self.slot_kind, 2, self._vorticity_pair, (xi, vi, w))
+        self._near(i, 2, self._vorticity_pair, (xi, vi, w))
         return w / self.f_rho0
 
     @ti.func
