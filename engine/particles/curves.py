@@ -7,7 +7,7 @@ in the kernel by a short unrolled scan.
 import numpy as np
 import taichi as ti
 
-from ..config.schema import MAX_STOPS
+from ..config.emitters import MAX_STOPS
 
 
 class Curves:
