@@ -22,7 +22,7 @@ EXPECTED = {
     "api": ["first build of sparks", "level restart", "second copy, prepared", "3 build/discard cycles",
             "add_emitter, effect compiled", "a new render size", "argument checks per frame",
             "first call, new field (template)", "first call, new ndarray"],
-    "interact": ["grid build per 100k (Taichi)", "granular sweep per 100k (Taichi)",
+    "interact": ["grid build per 100k (Taichi)", "neighbour listing per 100k (Taichi)", "granular sweep per 100k (Taichi)",
                  "sand at 1280x720 (step + render)", "water at 1280x720 (step + render)",
                  "galaxy at 1280x720 (step + render)"],
     "rigid": ["100 boxes into piles (xpbd, 20 substeps)", "1,000 free bodies, rk4 (ode path)"],
