@@ -143,7 +143,7 @@ def build_parser(extra=()) -> argparse.ArgumentParser:
     c.add_argument("--out", default=os.path.join("renders", "charts"), type=T(flags.path))
     c.add_argument("--quick", action="store_true", help="coarse sweeps (under a minute)")
     c.add_argument("--only", default=None,
-                   help="workprec, stability, energy, scenes, bounce, soft_energy, or one problem (kepler, lotka-volterra, ...)")
+                   help="workprec, stability, energy, scenes, bounce, soft_energy, fluid, or one problem (kepler, lotka-volterra, ...)")
     c.add_argument("--quiet", action="store_true", help="no progress display")
     c.set_defaults(func=_cmd_chart)
 

@@ -42,7 +42,7 @@ def test_chart_writes_every_chart(tmp_path):
 
     r = ok(particles("chart", "--quick", "--quiet", "--out", tmp_path))
     written = {os.path.basename(p) for p in r.stdout.split()}
-    for stem in ("stability", "energy_drift", "bounce", "workprec_kepler", "workprec_scene_sparks"):
+    for stem in ("stability", "energy_drift", "bounce", "workprec_kepler", "workprec_scene_sparks", "fluid"):
         assert {f"{stem}.png", f"{stem}.csv"} <= written, (stem, sorted(written))
     assert "soft_energy" in CHARTS and any(w.startswith("soft_energy") for w in written), sorted(written)
     for p in r.stdout.split():

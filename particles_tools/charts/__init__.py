@@ -8,7 +8,9 @@
 * ``energy_drift.csv/.png`` — relative energy error over a long fixed-step run;
 * ``bounce.csv/.png`` — the dropped ball's error with impacts located in time and projected;
 * ``soft_energy_drift.csv/.png`` — the same for a neo-Hookean solid and a bending cloth (issue 24):
-  Euler against symplectic Euler and Verlet at one h.
+  Euler against symplectic Euler and Verlet at one h;
+* ``fluid.csv/.png`` — the density error (compression) position-based fluids leave in a dam break
+  and a settling tank, against Jacobi iterations a step, the step h and the work (issue 23).
 
 Needs the ``chart`` extra (matplotlib, scipy): ``pip install -e ".[chart]"``.
 """
@@ -17,7 +19,7 @@ import os
 import sys
 from typing import Iterable, List, Optional, Union
 
-CHARTS = ("workprec", "stability", "energy", "scenes", "bounce", "soft_energy")
+CHARTS = ("workprec", "stability", "energy", "scenes", "bounce", "soft_energy", "fluid")
 # NUMERICS.md's work–precision figures, drawn over the matching charts as × markers
 _NUMERICS_REFS = {
     "lotka-volterra": [
@@ -51,8 +53,8 @@ def run_charts(out_dir: Union[str, os.PathLike], quick: bool = False,
                which: Optional[Union[str, Iterable[str]]] = None, quiet: bool = True) -> List[str]:
     """Compute and write the charts; return the paths written (CSV and PNG).
 
-    which: None for all, or names among ``workprec``, ``stability``, ``energy``, ``scenes`` and
-    the work–precision problem names (``kepler`` …) for one problem's diagram only.
+    which: None for all, or names among ``workprec``, ``stability``, ``energy``, ``scenes``,
+    ``bounce``, ``soft_energy``, ``fluid`` and the work–precision problem names (``kepler`` …) for one problem's diagram only.
     quick: coarser sweeps and shorter runs (well under a minute in total), for tests.
     quiet: no progress display (it is drawn only on a terminal anyway).
     Every file is written under a temporary name and renamed when whole.
@@ -162,6 +164,13 @@ def _jobs(names, out_dir, quick):
 
             return _chart(out_dir, "bounce", bounce_rows(quick=quick), BFIELDS, bounce_png)
         jobs.append(("bounce", bounce_job))
+    if "fluid" in names:
+        def fluid_job():
+            from .fluid import FIELDS as FFIELDS
+            from .fluid import fluid_png, fluid_rows
+
+            return _chart(out_dir, "fluid", fluid_rows(quick=quick), FFIELDS, fluid_png)
+        jobs.append(("fluid", fluid_job))
     if "stability" in names:
         def stability_job():
             from .stability import NUMERICS_TABLE, stability_rows
