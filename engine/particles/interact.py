@@ -151,6 +151,9 @@ class Interactions:
             self.mesh = p.method == "mesh" or (p.method == "auto" and slots > AUTO_DIRECT)
             if self.mesh:
                 self.g_acc = ti.Vector.field(3, ti.f32, shape=n)  # the mesh's accelerations, m/s²
+            else:  # the pair sum reads the gravity slots' positions packed in slot order
+                self.g_pos = ti.Vector.field(3, ti.f32, shape=n)
+                self.g_count = ti.field(ti.i32, shape=())
         self.grid = HashGrid(n, cell) if cell > 0 else None
         if self.grid is not None:
             # the list (see _listing): the visitors apply their own cut-offs (≤ cell), so a slot
@@ -449,16 +452,26 @@ class Interactions:
 
     @ti.func
     def _gravity(self, i):
-        """a_i = G m Σ_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2} over every other gravity slot (m/s²)."""
-        S = self.state
-        xi = S.particle_pos[i]
+        """a_i = G m Σ_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2} over every other gravity slot (m/s²),
+        in slot order over the packed positions (``_pack_gravity``): no branch in the loop, and i's
+        own term is exactly zero (r = 0, ε > 0), so it needs no test either."""
+        xi = self.state.particle_pos[i]
         a = ti.Vector([0.0, 0.0, 0.0])
-        for j in range(self.cap):
-            if j != i and self.slot_kind[j] == 3:
-                r = S.particle_pos[j] - xi
-                d2 = r.dot(r) + self.eps2
-                a += r / (d2 * ti.sqrt(d2))
+        for k in range(self.g_count[None]):
+            r = self.g_pos[k] - xi
+            d2 = r.dot(r) + self.eps2
+            a += r / (d2 * ti.sqrt(d2))
         return self.gm * a
+
+    @ti.func
+    def _pack_gravity(self):
+        """The gravity slots' positions into ``g_pos[0:g_count]`` in slot order (one serial pass)."""
+        self.g_count[None] = 0
+        ti.loop_config(serialize=True)
+        for j in range(self.cap):
+            if self.slot_kind[j] == 3:
+                self.g_pos[self.g_count[None]] = self.state.particle_pos[j]
+                self.g_count[None] += 1
 
     @ti.kernel
     def finish(self, h: ti.f32):
@@ -484,6 +497,7 @@ class Interactions:
                 if self.slot_kind[i] == 2:
                     self.vbuf[i] = self._fluid_velocity(i, h)
         if ti.static(self.gravity and not self.mesh):
+            self._pack_gravity()
             for i in range(self.cap):
                 if self.slot_kind[i] == 3:
                     self.delta[i] = S.particle_vel[i] + h * self._gravity(i)
