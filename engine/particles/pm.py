@@ -24,8 +24,9 @@ import numpy as np
 
 CELLS = 32  # grid nodes per axis over the particles' bounding box (the FFTs run on 2·CELLS)
 MAX_DIRECT = 20_000  # gravity slots summed over all pairs at most (method = "direct")
-AUTO_DIRECT = 2_000  # method = "auto": the pair sum up to this many gravity slots, the mesh beyond
-# (on two cores the two cost about the same near 2,000 slots: ~25 ms a step)
+AUTO_DIRECT = 5_000  # method = "auto": the pair sum up to this many gravity slots, the mesh beyond
+# (on two cores the two cost about the same near 5,500 slots, ~17 ms a step: the pair sum 2.5 ms at
+# 2,000, 8.7 at 4,000, 34 at 8,000; the mesh 16–19 ms over that range, measured 2026-11-24 loaded)
 MAX_MESH = 2_000_000  # gravity slots at most on the mesh (host arrays of N × 3 float64)
 
 
