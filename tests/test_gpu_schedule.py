@@ -81,7 +81,7 @@ ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE st
            # engine.rigid.kernel: XPBD's contacts and joints, Gauss-Seidel in a fixed order (each
            # correction sees the ones before it: the deterministic alternative to float atomics);
            # rigid bodies are few and their f64 state lives on the CPU
-           "_build.<locals>.joints": "rigid XPBD joints, Gauss-Seidel",
+           "_build.<locals>.joints": "rigid XPBD joints, Gauss-Seidel, then the coupled ones' direct solve",
            # fixed-order f64 energy sums: diagnostics read when asked (scene.energy()), not a frame's work
            "spring_energy": "soft-body spring energy, serial f64 sum in spring order",
            "_energy": "energy terms of an element group, serial f64 sum in element order",

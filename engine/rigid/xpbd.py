@@ -2,7 +2,8 @@
 Simulation with Extended Position Based Dynamics"), substep by substep:
 
 1. integrate: v += h g; x += h v; ω += h I⁻¹(−ω × Iω) (body frame); q += ½h[ω, 0]q, normalised;
-2. position solve: joints (in config order), then every contact's depth d = (p_b − p_a)·n,
+2. position solve: joints (in config order; the point constraints of joints that share a moving
+   body together, by a direct solve: :mod:`.joints`), then every contact's depth d = (p_b − p_a)·n,
    Δλ = d / (w_a + w_b) with w = 1/m + (r × n)ᵀ I⁻¹ (r × n), then static friction, which undoes
    the contact points' tangential slip where its Δλ_t < μ λ_n;
 3. v = Δx/h, ω = 2 vec(Δq q⁻¹)/h;
@@ -76,13 +77,15 @@ class XPBDSolver:
                 cap *= 2
             self._capacity = cap
             m = self.model
-            self.F = F = kernel.Fields(m.count, cap, self.nj)
+            plan = self.joints.direct_plan() if self.nj else None
+            self.F = F = kernel.Fields(m.count, cap, self.nj, plan)
             F.inertia.from_numpy(_pad(m.body_inertia, F.nb))
             F.kin.from_numpy(_pad(m.body_kinematic.astype(np.int32), F.nb))
             if self.nj:
                 names = "jt ja jb jra jrb jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha".split()
                 for k, arr in zip(names, self.joints.arrays()[1:]):
                     getattr(F, k).from_numpy(arr)
+                F.jdir.from_numpy(plan["flag"])
             F.substeps(0, 0.0, [0.0, 0.0, 0.0], 0.0, 0, 0)  # compile now
         return self.F
 
