@@ -197,6 +197,7 @@ def test_fluid_density_measure_is_the_solvers():
     assert compression(2.0 * lattice) == (0.0, 0.0)
 
 
+@pytest.mark.slow  # (17 s: the default run stays under 5 minutes; the density measure's test stays in it)
 def test_fluid_chart_compression_falls_with_iterations():
     """Issue 23: the fluid chart's data in quick mode (the settling tank, 666 particles, h = 1/120,
     2 and 8 Jacobi iterations, 1 s): finite numbers, nothing blown up, and 8 iterations leave under
