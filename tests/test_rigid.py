@@ -389,14 +389,14 @@ def test_the_kept_pair_list_gives_the_broad_phases_pairs_at_every_step():
     # bodies drifting (some fast, some still), margins growing and shrinking, a body jumping far
     # and a NaN: at every call the kept list gives exactly broad_phase's pairs and order, and it
     # is rebuilt only now and then (the free-flight case it is for)
-    from engine.rigid import collide
+    from engine.rigid import broad
 
     rng = np.random.default_rng(3)
     n = 400
     x = rng.uniform(0.0, 6.0, (n, 3))
     v = rng.normal(size=(n, 3)) * np.where(rng.random(n) < 0.2, 2.0, 0.05)[:, None]
     bound = rng.uniform(0.05, 0.3, n)
-    keep, built = collide.PairList(), 0
+    keep, built = broad.PairList(), 0
     for step in range(300):
         x = x + v / 240.0
         margin = 0.01 + 0.01 * rng.random(n) * (step % 5 == 0)
@@ -407,7 +407,7 @@ def test_the_kept_pair_list_gives_the_broad_phases_pairs_at_every_step():
         before = keep.x0
         got = keep.pairs(x, bound, margin)
         built += keep.x0 is not before
-        assert np.array_equal(got, collide.broad_phase(x, bound, margin)), step
+        assert np.array_equal(got, broad.broad_phase(x, bound, margin)), step
     assert built < 100  # kept most steps (rebuilt on a far jump, a NaN, or after enough drift)
 
 
@@ -416,11 +416,11 @@ def test_the_grid_broad_phase_finds_the_sweeps_pairs_in_the_same_order(table, mo
     # the broad phase (a uniform grid) gives exactly the sorted sweep's pairs and order, on
     # clouds, flat layers, coincident bodies and a lattice (where the sweep lists every slab),
     # through its dense table of cells and through its binary search among occupied cells
-    from engine.rigid import collide
-    from engine.rigid.collide import broad_phase, sweep_phase
+    from engine.rigid import broad
+    from engine.rigid.broad import broad_phase, sweep_phase
 
     if table == "sparse":
-        monkeypatch.setattr(collide, "DENSE_CELLS", -10 ** 9)
+        monkeypatch.setattr(broad, "DENSE_CELLS", -10 ** 9)
 
     rng = np.random.default_rng(0)
     for trial in range(200):

@@ -25,7 +25,7 @@ import numpy as np
 
 from . import quat
 from .quat import cross
-from .kernel import JOINT_CODES
+from .elements import JOINT_CODES
 
 
 def _perp(v):

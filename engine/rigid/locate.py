@@ -20,7 +20,7 @@ Rules, for a step from Y₀ at t to Y₁ at t + h taken by the path's own step f
    step (a bouncing body's Zeno tail falls to the projection).
 
 A step with nothing to meet pays one narrow phase at Y₁ (the pair list of the broad phase is
-kept between steps, :class:`~engine.rigid.collide.PairList`); a step with an impact pays one
+kept between steps, :class:`~engine.rigid.broad.PairList`); a step with an impact pays one
 step and one narrow phase of the impact's bodies per evaluation.
 """
 from __future__ import annotations

@@ -17,7 +17,7 @@ import numpy as np
 from ..ode.driver import DriverStats, SimulationDiverged
 from ..paths import sample_path
 from ..system import SystemBase
-from . import collide, quat
+from . import broad, collide, quat
 from .quat import cross
 from .joints import Joints
 from .model import RigidModel, RigidState
@@ -49,7 +49,7 @@ class RigidSystem(SystemBase):
         self.label = f"{name}: {self.method}"
         self.t = 0.0
         self.last_contacts = None
-        self._pair_list = collide.PairList()  # the broad phase's pairs, kept while they hold
+        self._pair_list = broad.PairList()  # the broad phase's pairs, kept while they hold
         self._meshes = [mesh(self.model.body_shape[i], self.model.body_radius[i], self.model.body_half[i],
                              self.model.body_half_length[i]) for i in range(self.model.count)]
         self._kin = np.flatnonzero(self.model.body_kinematic)
