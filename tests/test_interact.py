@@ -233,10 +233,10 @@ def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
     checked = []
 
     def check():
-        if I.stale[None]:
+        if I.lists.stale[None]:
             return  # (relisted before use)
         kind, x, cells = I.slot_kind.to_numpy(), I.state.particle_pos.to_numpy(), I.grid.slot_cell.to_numpy()
-        nnbr, nbr = I.nnbr.to_numpy(), I.nbr.to_numpy()
+        nnbr, nbr = I.lists.count.to_numpy(), I.lists.nbr.to_numpy()
         members = np.flatnonzero(I.member.to_numpy())
         for i in members:
             same = members[(kind[members] == kind[i]) & (members != i)]
@@ -251,9 +251,9 @@ def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
     _run(sc, 6)
     assert len(checked) >= 6 * 4 * 5 and min(checked) > 0
     assert I.stats()["unlisted"] == 0
-    I.list_limit[None] = 3  # a member with more neighbours walks the grid
-    I._listing()
-    assert I.stats()["unlisted"] > 0 and (I.nnbr.to_numpy() == -1).any()
+    I.lists.limit[None] = 3  # a member with more neighbours walks the grid
+    I.relist()
+    assert I.stats()["unlisted"] > 0 and (I.lists.count.to_numpy() == -1).any()
 
 
 def test_settled_fluid_column_height():

@@ -20,12 +20,13 @@ left out of the grid and counted in ``ungridded`` (reported, as pools count drop
 ``max_bucket`` reports the fullest bucket of the last build. Readers gather per particle
 (``for_neighbours``): visit the 27 cells around the slot's cell, and within each the slots of its
 bucket whose ``slot_cell`` is that cell (two cells that share a bucket are told apart, so each
-neighbour is seen exactly once).
+neighbour is seen exactly once). :class:`NeighbourLists` lists each slot's near neighbours from
+that walk once, for gathers that run several times over the same neighbourhood.
 """
 
 import taichi as ti
 
-from .sizing import BLOCK, MAX_CELL_INDEX, table_size
+from .sizing import BLOCK, MAX_CELL_INDEX, NEIGHBOURS, table_size
 
 _P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003, "Optimized spatial hashing"
 
@@ -154,3 +155,78 @@ class HashGrid:
         """The last build's integer counts (one read-back each)."""
         return {"members": int(self.members[None]), "ungridded": int(self.ungridded[None]),
                 "max_bucket": int(self.max_bucket[None]), "table": self.table}
+
+
+@ti.data_oriented
+class NeighbourLists:
+    """Each member slot's neighbours listed once from a :class:`HashGrid`'s walk and reused by
+    later gathers while they hold (Macklin & Müller 2013, Algorithm 1: "find neighbouring
+    particles" once a step, then iterate).
+
+    ``build(member, kind)`` lists, for every slot with ``member[i] != 0``, the slots j of the walk
+    (the 27 cells around its cell at the grid's last build, ``kind[j] == kind[i]``, j ≠ i) within
+    ``cell·(1 + SKIN)`` of it, in the walk's order, at most NEIGHBOURS of them; a slot with more is
+    marked to walk the grid instead (counted in ``unlisted``: nothing is cut). ``visit`` gathers over
+    a slot's list (or walk) with the walk's visitor contract, so a gather whose visitor applies a
+    cut-off ≤ ``cell`` sums the same terms in the same order as the walk would, as long as no member
+    has moved SKIN·cell/2 since the listing: ``moved(i, x)`` (call it where a member is moved)
+    raises ``stale``, and the owner lists again before the next gather.
+
+    Fields: ``nbr`` (i32, capacity × NEIGHBOURS), ``count`` (i32: listed; −1: walks the grid),
+    ``x_ref`` (where each member was listed), ``stale``, ``unlisted``, ``limit`` (i32 scalars;
+    ``limit`` is NEIGHBOURS, lower in tests to force the walk)."""
+
+    SKIN = 0.2
+
+    def __init__(self, grid: HashGrid, pos):
+        """``grid``: the walk; ``pos``: the slots' positions (vec3 f32 field, m)."""
+        n = grid.cap
+        self.grid, self.pos = grid, pos
+        self.nbr = ti.field(ti.i32, shape=(n, NEIGHBOURS))
+        self.count = ti.field(ti.i32, shape=n)
+        self.x_ref = ti.Vector.field(3, ti.f32, shape=n)
+        self.stale = ti.field(ti.i32, shape=())
+        self.unlisted = ti.field(ti.i32, shape=())
+        self.limit = ti.field(ti.i32, shape=())
+        self.limit[None] = NEIGHBOURS
+        self.reach2 = (grid.cell * (1.0 + self.SKIN)) ** 2
+        self.move2 = (0.5 * self.SKIN * grid.cell) ** 2
+
+    @ti.kernel
+    def build(self, member: ti.template(), kind: ti.template()):
+        self.stale[None] = 0
+        self.unlisted[None] = 0
+        for i in range(self.grid.cap):
+            m = 0
+            if member[i] != 0:
+                xi = self.pos[i]
+                self.x_ref[i] = xi
+                self.grid.for_neighbours(i, kind, kind[i], self._list_pair, (i, xi, m))
+                if m > self.limit[None]:
+                    m = -1
+                    ti.atomic_add(self.unlisted[None], 1)  # (an integer count: the same in any order)
+            self.count[i] = m
+
+    @ti.func
+    def _list_pair(self, j, i, xi, m: ti.template()):
+        r = xi - self.pos[j]
+        if r.dot(r) < self.reach2:
+            if m < NEIGHBOURS:
+                self.nbr[i, m] = j
+            m += 1
+
+    @ti.func
+    def visit(self, i, kind: ti.template(), want, visit: ti.template(), args: ti.template()):
+        """``visit(j, *args)`` for slot i's listed neighbours (or, past the list, the walk's)."""
+        m = self.count[i]
+        if m >= 0:
+            for k in range(m):
+                visit(self.nbr[i, k], *args)
+        else:
+            self.grid.for_neighbours(i, kind, want, visit, args)
+
+    @ti.func
+    def moved(self, i, x):
+        """Member i is now at x: the lists are stale once it is SKIN·cell/2 from where it was listed."""
+        if (x - self.x_ref[i]).norm_sqr() > self.move2:
+            self.stale[None] = 1  # (every writer writes 1: the same in any order)

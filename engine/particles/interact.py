@@ -35,8 +35,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from ..geometry.grid import HashGrid
-from ..geometry.sizing import NEIGHBOURS
+from ..geometry.grid import HashGrid, NeighbourLists
 from . import pm
 from .pm import AUTO_DIRECT
 
@@ -49,10 +48,6 @@ GRANULAR_RELAX = 0.5  # Jacobi relaxation: a fixed factor (not 1/contact count: 
 # a bound in the spirit of Macklin et al. 2014's pre-stabilisation (§4.4); resting piles never reach it
 GRANULAR_MAX_SPEED = 0.1
 REPEL = 0.25  # fraction of a repel overlap removed per step (soft)
-# each member's neighbours listed once a step (Macklin & Müller 2013, Algorithm 1: "find
-# neighbouring particles" once, then iterate): the slots of its 27 cells within (1 + SKIN) of the
-# grid's cell, in the grid's order, at most NEIGHBOURS of them (engine.geometry.sizing)
-SKIN = 0.2
 S_CORR_K, S_CORR_DQ, S_CORR_N = 0.1, 0.2, 4  # Macklin & Müller 2013, §4 (k, Δq/h, n)
 FLUID_EPS = 0.01  # λ relaxation ε, as a fraction of the lattice's Σ|∇C|²
 
@@ -155,18 +150,9 @@ class Interactions:
                 self.g_pos = ti.Vector.field(3, ti.f32, shape=n)
                 self.g_count = ti.field(ti.i32, shape=())
         self.grid = HashGrid(n, cell) if cell > 0 else None
-        if self.grid is not None:
-            # the list (see _listing): the visitors apply their own cut-offs (≤ cell), so a slot
-            # within cell·(1 + SKIN) when listed stays listed while no member has moved SKIN·cell/2
-            self.nbr = ti.field(ti.i32, shape=(n, NEIGHBOURS))
-            self.nnbr = ti.field(ti.i32, shape=n)  # listed neighbours; −1: more than NEIGHBOURS (the grid's walk)
-            self.x_ref = ti.Vector.field(3, ti.f32, shape=n)  # where each member was when listed
-            self.stale = ti.field(ti.i32, shape=())  # a member moved past SKIN·cell/2 since the listing
-            self.unlisted = ti.field(ti.i32, shape=())  # members whose neighbours overflowed the list
-            self.list_limit = ti.field(ti.i32, shape=())  # NEIGHBOURS (a test sets 0: every member walks the grid)
-            self.list_limit[None] = NEIGHBOURS
-            self.l_reach2 = (cell * (1.0 + SKIN)) ** 2
-            self.l_move2 = (0.5 * SKIN * cell) ** 2
+        # each member's neighbours listed once a step and reused by every gather while they hold
+        # (engine.geometry.grid.NeighbourLists: every visitor here cuts off within the cell)
+        self.lists = NeighbourLists(self.grid, state.particle_pos) if self.grid is not None else None
 
     # -- per-step entry --------------------------------------------------------------------------
     def step(self, h: float) -> None:
@@ -176,13 +162,13 @@ class Interactions:
             self._mesh_gravity()
         if self.grid is not None:
             self.grid.build(self.state.particle_pos, self.member)
-            self._listing()
+            self.relist()
             for _ in range(self.iterations):
-                if self.stale[None]:
-                    self._listing()
+                if self.lists.stale[None]:
+                    self.relist()
                 self.sweep(h)
-            if self.stale[None]:
-                self._listing()
+            if self.lists.stale[None]:
+                self.relist()
         self.finish(h)
 
     def _mesh_gravity(self) -> None:
@@ -200,7 +186,11 @@ class Interactions:
     def stats(self) -> dict:
         if self.grid is None:
             return {}
-        return dict(self.grid.stats(), unlisted=int(self.unlisted[None]))
+        return dict(self.grid.stats(), unlisted=int(self.lists.unlisted[None]))
+
+    def relist(self) -> None:
+        """List each member's neighbours of its own kind (at the positions now)."""
+        self.lists.build(self.member, self.slot_kind)
 
     # -- kernels ---------------------------------------------------------------------------------
     @ti.kernel
@@ -216,44 +206,6 @@ class Interactions:
             self.v_pre[i] = S.particle_vel[i]
             self.corr[i] = ti.Vector([0.0, 0.0, 0.0])
             self.press[i] = 0.0
-
-    @ti.kernel
-    def _listing(self):
-        """Each member's neighbours of its own kind within cell·(1 + SKIN), in the grid's order
-        (so every gather sums the same terms in the same order as walking the grid would: its
-        visitors skip what is beyond their cut-off); past NEIGHBOURS, that member walks the grid
-        (counted in ``unlisted``, never cut)."""
-        S = self.state
-        self.stale[None] = 0
-        self.unlisted[None] = 0
-        for i in range(self.cap):
-            m = 0
-            if self.member[i] != 0:
-                xi = S.particle_pos[i]
-                self.x_ref[i] = xi
-                self.grid.for_neighbours(i, self.slot_kind, self.slot_kind[i], self._list_pair, (i, xi, m))
-                if m > self.list_limit[None]:
-                    m = -1
-                    ti.atomic_add(self.unlisted[None], 1)
-            self.nnbr[i] = m
-
-    @ti.func
-    def _list_pair(self, j, i, xi, m: ti.template()):
-        r = xi - self.state.particle_pos[j]
-        if r.dot(r) < self.l_reach2:
-            if m < NEIGHBOURS:
-                self.nbr[i, m] = j
-            m += 1
-
-    @ti.func
-    def _near(self, i, want, visit: ti.template(), args: ti.template()):
-        """``visit(j, *args)`` for slot i's listed neighbours (or, past the list, for the grid's)."""
-        m = self.nnbr[i]
-        if m >= 0:
-            for k in range(m):
-                visit(self.nbr[i, k], *args)
-        else:
-            self.grid.for_neighbours(i, self.slot_kind, want, visit, args)
 
     @ti.func
     def _w(self, r2):
@@ -277,7 +229,7 @@ class Interactions:
         xi = S.particle_pos[i]
         di = h * S.particle_vel[i] + self.corr[i]  # i's displacement over the step so far
         dx = ti.Vector([0.0, 0.0, 0.0])
-        self._near(i, 1, self._granular_pair, (xi, di, h, dx))
+        self.lists.visit(i, self.slot_kind, 1, self._granular_pair, (xi, di, h, dx))
         return GRANULAR_RELAX * dx
 
     @ti.func
@@ -305,7 +257,7 @@ class Interactions:
     def _repel(self, i):
         xi = self.state.particle_pos[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
-        self._near(i, 4, self._repel_pair, (xi, dx))
+        self.lists.visit(i, self.slot_kind, 4, self._repel_pair, (xi, dx))
         return dx
 
     @ti.func
@@ -323,7 +275,7 @@ class Interactions:
         rho = self._w(0.0)
         gi = ti.Vector([0.0, 0.0, 0.0])
         sq = 0.0
-        self._near(i, 2, self._density_pair, (xi, rho, gi, sq))
+        self.lists.visit(i, self.slot_kind, 2, self._density_pair, (xi, rho, gi, sq))
         C = ti.max(rho / self.f_rho0 - 1.0, 0.0)
         return -C / (sq + gi.dot(gi) + self.f_eps)
 
@@ -344,7 +296,7 @@ class Interactions:
         xi = self.state.particle_pos[i]
         li = self.lam[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
-        self._near(i, 2, self._delta_pair, (xi, li, dx))
+        self.lists.visit(i, self.slot_kind, 2, self._delta_pair, (xi, li, dx))
         return dx / self.f_rho0
 
     @ti.func
@@ -390,8 +342,7 @@ class Interactions:
                         x = nx
                 S.particle_pos[i] = x
                 self.corr[i] = x - self.x_pre[i]
-                if (x - self.x_ref[i]).norm_sqr() > self.l_move2:
-                    self.stale[None] = 1  # (every writer writes 1: the same in any order)
+                self.lists.moved(i, x)
 
     @ti.func
     def _fluid_velocity(self, i, h):
@@ -402,7 +353,7 @@ class Interactions:
         xs = ti.Vector([0.0, 0.0, 0.0])
         eta = ti.Vector([0.0, 0.0, 0.0])
         st = ti.Vector([0.0, 0.0, 0.0])
-        self._near(i, 2, self._velocity_pair, (xi, vi, wi, xs, eta, st))
+        self.lists.visit(i, self.slot_kind, 2, self._velocity_pair, (xi, vi, wi, xs, eta, st))
         v = vi + self.f_visc * xs / self.f_rho0
         if ti.static(self.f_vort > 0):
             en = eta.norm()
@@ -439,7 +390,7 @@ class Interactions:
         S = self.state
         xi, vi = S.particle_pos[i], S.particle_vel[i]
         w = ti.Vector([0.0, 0.0, 0.0])
-        self._near(i, 2, self._vorticity_pair, (xi, vi, w))
+        self.lists.visit(i, self.slot_kind, 2, self._vorticity_pair, (xi, vi, w))
         return w / self.f_rho0
 
     @ti.func

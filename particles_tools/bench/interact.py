@@ -121,7 +121,7 @@ def grid_rows(n: int, repeats: int):
 
     t_build = time_median(build, repeats)
     build()
-    t_list = time_median(I._listing, repeats)
+    t_list = time_median(I.relist, repeats)
     st = G.stats()
     pos0 = S.particle_pos.to_numpy()
 
