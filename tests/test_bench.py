@@ -63,7 +63,8 @@ def test_quick_bench_slow_section(section):
     assert rows, section
     if section == "output":
         ratios = [r.extra["ratio"] for r in rows if "ratio" in r.extra]
-        assert len(ratios) == 2 and all(0 < q < 10 for q in ratios)
+        # both ratios computed; their size is a timing (CI runs this beside other tests), not asserted
+        assert len(ratios) == 2 and all(math.isfinite(q) and q > 0 for q in ratios)
     if section == "effects":
         assert any(r.name == "worst effect" for r in rows)
     if section == "cloth" and cloth.available():
