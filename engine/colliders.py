@@ -281,11 +281,22 @@ class Colliders:
                     velocity=self.collider_vel[k].to_numpy().astype(np.float64),
                     angular_velocity=self._omega[k].copy())
 
-    def placement(self) -> bytes:
-        """Where the shapes are now, as bytes (radii and extents never change): what a cached
-        background depends on. Read from the host copy, so it costs no kernel launch."""
-        shown = [k for k, s in enumerate(self.specs) if s.visible]  # a rigid body's own shape is drawn by the body
-        return self._pos[shown].tobytes() + (self._quat[shown].tobytes() if self._turned else b"")
+    def shown_bounds(self) -> list:
+        """Each drawn shape as placed now: (its pose as bytes, centre (3,) float64 m, bounding
+        radius m; inf for a plane; radii and extents never change). What a kept background redraws
+        around when some of them move (engine.render.renderer): only the screen rectangles a moved
+        shape left and entered. Read from the host copy, so it costs no kernel launch; a rigid
+        body's own shape is drawn by the body, not here."""
+        out = []
+        for k, s in enumerate(self.specs):
+            if not s.visible:
+                continue
+            kind = self.kinds[k]
+            bound = (float("inf") if kind == PLANE else float(s.radius) if kind == SPHERE
+                     else float(np.linalg.norm(s.half_extents)) if kind == BOX
+                     else float(s.half_length) + float(s.radius))
+            out.append((self._pos[k].tobytes() + self._quat[k].tobytes(), self._pos[k].astype(np.float64), bound))
+        return out
 
     def index(self, name: str) -> int:
         for k, s in enumerate(self.specs):
@@ -562,5 +573,5 @@ class ColliderView(Colliders):
     def pose(self, k: int) -> dict:
         return self.table.pose(k)
 
-    def placement(self) -> bytes:
-        return self.table.placement()
+    def shown_bounds(self) -> list:
+        return self.table.shown_bounds()

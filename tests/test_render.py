@@ -114,6 +114,29 @@ def test_background_is_redrawn_when_camera_or_colliders_move():
     assert np.array_equal(cached, s.render())  # the move had been noticed
 
 
+@pytest.mark.slow  # (hair's compile: 10 s)
+def test_a_moving_collider_redraws_only_where_it_was_and_is():
+    """hair: the head (a sphere collider on a path) moves every frame over a ground plane, with a
+    soft body drawn into the frame's own copy of the background. The kept background redrawn in
+    the moved sphere's screen rectangles gives the bytes a whole redraw gives, frame after frame."""
+    s = _scene("configs/hair.toml", frames=0, size=(160, 90), particle_resolution=0.5)
+    R = s.renderer
+    rects = []
+    draw = R._background
+    R._background = lambda *a: (rects.append(a[-4:]), draw(*a))[1]
+    t = R.targets(s.width, s.height)
+    for k in range(12):
+        s.advance_frame()
+        img = s.render()
+        if k % 4 == 3:
+            t.bg_key = None  # a whole redraw
+            assert np.array_equal(s.render(), img), k
+    assert rects[0] == (0, 0, 160, 90)
+    part = [r for r in rects[1:] if r != (0, 0, 160, 90)]
+    assert len(part) == 11  # (each frame but the first; the forced whole redraws aside)
+    assert all(0 < (x1 - x0) * (y1 - y0) < 0.5 * 160 * 90 for x0, y0, x1, y1 in part), part
+
+
 @pytest.mark.slow
 def test_pair_list_grows_without_changing_the_image():
     s = _scene("configs/sparks.toml", frames=15)

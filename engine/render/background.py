@@ -3,8 +3,9 @@ colliders (or on the ground when there are none) and faintly lit collider sphere
 capsules, with the depth
 particles are tested against (a particle behind a sphere is hidden; near a surface it fades).
 
-Drawn only when the camera, the colliders or the image size change; between such frames the
-renderer keeps it, its reduced-resolution depth and its tone-mapped packed copy.
+Drawn only when the camera, the colliders or the image size change, and when only some colliders
+moved, only in the screen rectangles they left and entered; between such frames the renderer
+keeps it, its reduced-resolution depth and its tone-mapped packed copy.
 """
 # (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
 
@@ -134,9 +135,11 @@ def ray_capsule(o, d, c, a, half, rad):
 
 
 def build_background_kernel(render_cfg, colliders):
-    """``background(bgc, depth, o, f, r, u, th, W, H, show)``: bgc (H·W,) vec4 = (RGB, 0), depth
-    (H·W,) f32 metres along the view axis (SKY_DEPTH where nothing is hit). ``show`` 0 hides the
-    colliders (they are compiled in; the flag is a runtime switch, not a second kernel)."""
+    """``background(bgc, depth, o, f, r, u, th, W, H, show, x0, y0, x1, y1)``: bgc (H·W,) vec4 =
+    (RGB, 0), depth (H·W,) f32 metres along the view axis (SKY_DEPTH where nothing is hit), drawn
+    in the pixel rectangle [x0, x1) × [y0, y1) only (a pixel's value depends on its own ray alone, so
+    a rectangle redrawn gives the bytes a whole redraw would). ``show`` 0 hides the colliders (they
+    are compiled in; the flag is a runtime switch, not a second kernel)."""
     bgc = tuple(float(c) for c in render_cfg.background)
     specs = colliders.specs if colliders is not None else []
     vis = [k for k, s in enumerate(specs) if s.visible]
@@ -155,9 +158,9 @@ def build_background_kernel(render_cfg, colliders):
 
     @ti.kernel
     def background(out: ND_V4, depth: ND_F, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32,
-                   W: ti.i32, H: ti.i32, show: ti.i32):
-        for py in range(H):
-            for px in range(W):
+                   W: ti.i32, H: ti.i32, show: ti.i32, x0: ti.i32, y0: ti.i32, x1: ti.i32, y1: ti.i32):
+        for py in range(y0, y1):
+            for px in range(x0, x1):
                 d = ray_dir(px, py, f, r, u, th, W, H)
                 col = ti.Vector([bgc[0], bgc[1], bgc[2]]) * (0.6 + 0.8 * (0.5 + 0.5 * d[1]))
                 z = SKY_DEPTH
@@ -204,12 +207,14 @@ def build_background_kernel(render_cfg, colliders):
 
 
 @ti.kernel
-def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, k: ti.i32):
+def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, k: ti.i32,
+                     x0: ti.i32, y0: ti.i32, x1: ti.i32, y1: ti.i32):
     """The reduced level's depth, stored after the full-resolution one (depth[W·H + y·Wl + x]):
     the farthest depth under each k×k block (Cantlay 2007: with the maximum, a reduced-resolution
-    particle is not hidden by a thin nearer edge inside its texel)."""
-    for y in range(Hl):
-        for x in range(Wl):
+    particle is not hidden by a thin nearer edge inside its texel), for the texels [x0, x1) ×
+    [y0, y1)."""
+    for y in range(y0, y1):
+        for x in range(x0, x1):
             z = 0.0
             for dy in range(k):
                 for dx in range(k):
@@ -218,8 +223,11 @@ def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, 
 
 
 @ti.kernel
-def copy_background(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, n: ti.i32):
-    """The frame's own background and depth (soft bodies draw into them) from the kept ones."""
-    for k in range(n):
-        fbg[k] = bgc[k]
-        fdep[k] = depth[k]
+def copy_background(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, W: ti.i32, x0: ti.i32, y0: ti.i32,
+                    x1: ti.i32, y1: ti.i32):
+    """The frame's own background and depth (soft bodies draw into them) from the kept ones, in
+    the pixel rectangle [x0, x1) × [y0, y1)."""
+    for y in range(y0, y1):
+        for k in range(y * W + x0, y * W + x1):
+            fbg[k] = bgc[k]
+            fdep[k] = depth[k]

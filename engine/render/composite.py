@@ -423,11 +423,13 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                 out[k] = finish(bgc[k], low, full, exposure, mode)
 
     @ti.kernel
-    def pack_background(bgc: ND_V4, bg_packed: ND_U32, n: ti.i32, exposure: ti.f32,
-                        mode: ti.i32):
-        """The background alone, tone-mapped and packed: what an untouched tile copies."""
-        for k in range(n):
-            bg_packed[k] = finish(bgc[k], EMPTY_LAYER, EMPTY_LAYER, exposure, mode)
+    def pack_background(bgc: ND_V4, bg_packed: ND_U32, W: ti.i32, x0: ti.i32, y0: ti.i32, x1: ti.i32,
+                        y1: ti.i32, exposure: ti.f32, mode: ti.i32):
+        """The background alone, tone-mapped and packed: what an untouched tile copies (in the
+        pixel rectangle [x0, x1) × [y0, y1))."""
+        for y in range(y0, y1):
+            for k in range(y * W + x0, y * W + x1):
+                bg_packed[k] = finish(bgc[k], EMPTY_LAYER, EMPTY_LAYER, exposure, mode)
 
     return dict(splat_tiles=splat_tiles, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
                 composite_tiles=composite_tiles, composite_pixels=composite_pixels,

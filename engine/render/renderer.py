@@ -2,7 +2,8 @@
 
 A frame, each step one kernel (PERF-NOTES: a launch costs ~17 µs; nothing here loops in Python
 over particles or pixels):
-1. background (``background.py``) — only when the camera, colliders or size changed;
+1. background (``background.py``) — only when the camera, colliders or size changed (only the
+   rectangles a moved collider left and entered when nothing else did);
 2. soft bodies (``mesh.py``) into the frame's own background and depth, only where they are;
 3. sprites (``sprites.py``): every live particle → a sprite record, at full or reduced resolution;
 4. binning (``binning.py``): a stable counting sort of sprites into 16×16 tiles;
@@ -31,6 +32,27 @@ from .targets import FrameTargets, packed_view
 SCHEDULES = ("tiles", "pixels")
 MAX_SIZES_KEPT = 4  # image sizes whose buffers a Renderer keeps (least recently used dropped)
 RESOLUTIONS = {"auto": None, "1": 1.0, "0.5": 0.5, "0.25": 0.25}
+def screen_box(cam, centre, radius: float, W: int, H: int):
+    """The pixel rectangle (x0, y0, x1, y1), clamped to the W×H image, that holds every pixel whose
+    ray (engine.render.background.ray_dir) meets the sphere (centre, radius) seen by ``cam`` = (o,
+    f, r, u, tan_half): the projected corners of the sphere's bounding cube (a convex set in front
+    of the eye projects inside its corners' hull) widened by 2 px. None when the cube reaches
+    behind the eye or the radius is infinite (a plane): the caller redraws everything."""
+    if not np.isfinite(radius):
+        return None
+    o, f, r, u = (np.asarray(a, np.float64) for a in cam[:4])
+    corners = np.asarray(centre, np.float64) + radius * np.array(
+        [(i, j, k) for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], np.float64)
+    d = corners - o
+    z = d @ f
+    if (z <= 1e-3).any():
+        return None
+    s = 0.5 * H / (z * float(cam[4]))
+    x, y = (d @ r) * s + 0.5 * W - 0.5, 0.5 * H - (d @ u) * s - 0.5  # pixel indices (centres at +0.5)
+    return (max(0, int(np.floor(x.min())) - 2), max(0, int(np.floor(y.min())) - 2),
+            min(W, int(np.ceil(x.max())) + 3), min(H, int(np.ceil(y.max())) + 3))
+
+
 def _arch_is_cpu() -> bool:
     from taichi.lang import impl
 
@@ -91,9 +113,31 @@ class Renderer:
             self._targets.move_to_end(key)
         return t
 
-    def _background_key(self, cam, show):
-        placed = b"" if self.colliders is None else self.colliders.placement()
-        return (tuple(tuple(float(x) for x in a) for a in cam[:4]), float(cam[4]), bool(show), placed)
+    def _background_rect(self, t: FrameTargets, cam, show):
+        """The pixel rectangle (x0, y0, x1, y1) of the kept background to redraw, or None.
+
+        The whole image when the camera, the size or ``show`` changed; when only some shown
+        colliders moved, the screen rectangle around where each moved one was and is now (its
+        bounding sphere's box projected, 2 px of margin; the whole image for a plane or a shape
+        reaching behind the camera); nothing when none did. Hidden colliders move nothing."""
+        view = (tuple(tuple(float(x) for x in a) for a in cam[:4]), float(cam[4]), bool(show))
+        shapes = self.colliders.shown_bounds() if (self.colliders is not None and show) else []
+        old, t.bg_shapes = t.bg_shapes, shapes
+        if t.bg_key != view or old is None or len(old) != len(shapes):
+            t.bg_key = view
+            return 0, 0, t.W, t.H
+        rect = None
+        for (was, c0, r0), (now, c1, r1) in zip(old, shapes):
+            if was != now:
+                for c, r in ((c0, r0), (c1, r1)):
+                    b = screen_box(cam, c, r, t.W, t.H)
+                    if b is None:
+                        return 0, 0, t.W, t.H
+                    rect = b if rect is None else (min(rect[0], b[0]), min(rect[1], b[1]),
+                                                   max(rect[2], b[2]), max(rect[3], b[3]))
+        if rect is not None and (rect[0] >= rect[2] or rect[1] >= rect[3]):
+            return None  # moved off screen
+        return rect
 
     # -- a frame ------------------------------------------------------------------------------
     def render(self, camera, width=None, height=None, *, out=None, exposure=None, show_colliders=None,
@@ -114,23 +158,26 @@ class Renderer:
         show = self.cfg.show_colliders if show_colliders is None else bool(show_colliders)
         exposure = float(self.cfg.exposure if exposure is None else exposure)
         mode = int(bool(transparent)) | (2 if bgra else 0)
-        key = self._background_key(cam, show)
-        redrawn = key != t.bg_key
-        if redrawn:
-            self._background(t.bgc, t.depth, *cam, W, H, int(show))
-            t.bg_key = key
+        rect = self._background_rect(t, cam, show)
+        if rect is not None:
+            self._background(t.bgc, t.depth, *cam, W, H, int(show), *rect)
             if t.mesh:
-                copy_background(t.fbg, t.fdep, t.bgc, t.depth, H * W)
-        if (key, exposure, mode) != t.packed_key:
-            self._k["pack_background"](t.bgc, t.bg_packed, H * W, exposure, mode)
-            t.packed_key = (key, exposure, mode)
+                copy_background(t.fbg, t.fdep, t.bgc, t.depth, W, *rect)
+        if (exposure, mode) != t.packed_key:
+            self._k["pack_background"](t.bgc, t.bg_packed, W, 0, 0, W, H, exposure, mode)
+            t.packed_key = (exposure, mode)
+        elif rect is not None:
+            self._k["pack_background"](t.bgc, t.bg_packed, W, *rect, exposure, mode)
         bgc, dep = t.bgc, t.depth
         if self.mesh is not None:
             self.mesh.update()
             self.mesh.draw(t, cam)
             bgc, dep = t.fbg, t.fdep
-        if t.has_lo and (redrawn or self.mesh is not None):
-            downsample_depth(dep, W, H, t.Wl, t.Hl, round(1 / t.scale))
+        if t.has_lo and (rect is not None or self.mesh is not None):
+            k = round(1 / t.scale)
+            lo = (0, 0, t.Wl, t.Hl) if self.mesh is not None or rect is None else \
+                (rect[0] // k, rect[1] // k, min(t.Wl, -(-rect[2] // k)), min(t.Hl, -(-rect[3] // k)))
+            downsample_depth(dep, W, H, t.Wl, t.Hl, k, *lo)
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:

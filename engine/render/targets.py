@@ -76,8 +76,9 @@ class FrameTargets:
             self.fdep = ti.ndarray(ti.f32, shape=both)
             self.dirty_prev = ti.ndarray(ti.i32, shape=self.T0)
             self.dirty_prev.fill(0)
-        self.bg_key = None  # what the background arrays were drawn for
-        self.packed_key = None  # (bg_key, exposure, transparent) of bg_packed
+        self.bg_key = None  # the view (camera, show) the background arrays were drawn for
+        self.bg_shapes = None  # the shown colliders' poses they were drawn with (Renderer._background_rect)
+        self.packed_key = None  # (exposure, mode) of bg_packed (redrawn with the background)
 
     def grow_pairs(self, n: int) -> None:
         self.pairs = ti.ndarray(vec16, shape=max(1, int(n)))
