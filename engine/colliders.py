@@ -59,6 +59,16 @@ OWNERS = ("collider", "rigid")  # who a shape belongs to: a config's collider, o
 IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
+@ti.kernel
+def _place(point: ti.template(), vel: ti.template(), rows: ti.types.ndarray()):
+    """Positions and velocities of every shape from rows (n, 6) = (x, y, z, vx, vy, vz), in the
+    fields' dtype: one launch a step where two ``from_numpy`` cost 0.35 ms of Python."""
+    for k in range(rows.shape[0]):
+        for c in ti.static(range(3)):
+            point[k][c] = rows[k, c]
+            vel[k][c] = rows[k, 3 + c]
+
+
 @dataclass
 class ColliderSpec:
     """One shape. ``kind`` is "plane" (point, normal), "sphere" (centre = point, radius), "box"
@@ -252,10 +262,9 @@ class Colliders:
         vel = (new - old) / dt if dt > 0 else np.zeros_like(new)
         self._pos[: self.count] = new
         self._t, self._moved = t, True
-        self.collider_point.from_numpy(self._pos)
         v = np.zeros_like(self._pos)
         v[: self.count] = vel
-        self.collider_vel.from_numpy(v)
+        _place(self.collider_point, self.collider_vel, np.concatenate([self._pos, v], axis=1))
         if orientations is not None or omegas is not None or self.rotating:
             qs = [s.orientation_at(t) for s in self.specs] if orientations is None else orientations
             ws = [s.angular_velocity for s in self.specs] if omegas is None else omegas

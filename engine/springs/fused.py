@@ -28,7 +28,7 @@ import taichi as ti
 from ..ode.staged import kick_drift_node
 from ..xpbd.constraints import sweep_serial
 from ..xpbd.solver import predict_node
-from .constraints import drive_node, finalize_node
+from .constraints import drive_node, finalize_node, write_moves
 from .forces import gather_node
 
 # Above this a serial frame loses to the 2-thread per-phase launches: the bench's 128 × 128 cloth
@@ -55,11 +55,7 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
     n = ti.static(model.node_count)
     g = ti.cast(fields.gravity[None], model.dtype)  # fields: engine.forces.fields.PointForces
     hh = ti.cast(h, model.dtype)
-    ti.loop_config(serialize=True)
-    for m in range(n_moves):
-        node = ti.cast(moves[m, 0], ti.i32)
-        for c in ti.static(range(3)):
-            model.pin_target[node][c] = ti.cast(moves[m, 1 + c], model.dtype)
+    write_moves(model, moves, n_moves)
     ti.loop_config(serialize=True)
     for k in range(times.shape[0]):
         alpha, t_end = times[k, 0], times[k, 1]

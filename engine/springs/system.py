@@ -118,9 +118,16 @@ class SpringSystem:
         # them into its launch); the fused run's bad_t, so first_nonfinite needs no read-back
         self._moves, self._bad_seen = {}, None
 
+    def _move_rows(self) -> np.ndarray:
+        """The pin targets set since the last step as (≥ 1, 4) f64 rows (node, x, y, z)."""
+        moves = np.zeros((max(1, len(self._moves)), 4), np.float64)
+        for r, (node, pos) in enumerate(self._moves.items()):
+            moves[r] = node, *pos
+        return moves
+
     def _flush_moves(self) -> None:
-        for node, pos in self._moves.items():
-            self.model.pin_target[node] = pos
+        if self._moves:
+            constraints.pin_moves(self.model, self._move_rows(), len(self._moves))
         self._moves = {}
 
     def _make_stepper(self) -> None:
@@ -269,11 +276,8 @@ class SpringSystem:
         else:
             segs = tuple((slot, kick, tuple(drifts)) for slot, kick, drifts in st._segments)
             args = (False, x0, x0, 0, segs, st.a)
-        moves = np.zeros((max(1, len(self._moves)), 4), np.float64)
-        for r, (node, pos) in enumerate(self._moves.items()):
-            moves[r] = node, *pos
         self._bad_seen = fused.run_steps(self.model, self.state, self.fields, self._contacts, x0, v0,
-                                         self._bad, self.contact_log, times, h, int(j == 0), moves,
+                                         self._bad, self.contact_log, times, h, int(j == 0), self._move_rows(),
                                          len(self._moves), *args)
         self._moves = {}
         return n - j
