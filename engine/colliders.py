@@ -248,14 +248,9 @@ class Colliders:
     def _placed(self, positions) -> np.ndarray:
         return np.asarray(positions, np.float64).reshape(self.count, 3).astype(self._np)
 
-    def move_to(self, t: float, positions=None, since=None, orientations=None, omegas=None) -> None:
-        """Set the shapes' positions for time t (``positions`` (count, 3), else from their
-        specs' paths). Their velocities: over the step ``since = (t0, positions at t0)`` when
-        given (a step's start, so a retried shorter step infers the same motion), else from the
-        motion since the last call. ``orientations`` (count, 4) [w, x, y, z] at t and ``omegas``
-        (count, 3) rad/s over the step: given, or (a table with spinning shapes) from the specs."""
-        if self.count == 0:
-            return
+    def _pose_row(self, t: float, positions, since) -> np.ndarray:
+        """:meth:`move_to`'s placement on the host: positions and velocities (n, 6) in the fields'
+        dtype, the host copy left there (the fields are the caller's to write)."""
         new = self._placed([s.position_at(t) for s in self.specs] if positions is None else positions)
         t0, old = (since[0], self._placed(since[1])) if since is not None else (self._t, self._pos[: self.count])
         dt = t - t0
@@ -264,7 +259,25 @@ class Colliders:
         self._t, self._moved = t, True
         v = np.zeros_like(self._pos)
         v[: self.count] = vel
-        _place(self.collider_point, self.collider_vel, np.concatenate([self._pos, v], axis=1))
+        return np.concatenate([self._pos, v], axis=1)
+
+    def poses_over(self, control, steps) -> np.ndarray:
+        """Where ``control`` has the shapes over each step (t0, t1) of ``steps``, as :meth:`follow`
+        places them, as rows (len(steps), n, 6) for a launch that runs those steps to write (a
+        soft body's fused frame, engine.springs.fused); the host copy is left at the last step.
+        Only for shapes that move without turning (the caller checks)."""
+        return np.stack([self._pose_row(t1, control.collider_positions(t1), (t0, control.collider_positions(t0)))
+                         for t0, t1 in steps])
+
+    def move_to(self, t: float, positions=None, since=None, orientations=None, omegas=None) -> None:
+        """Set the shapes' positions for time t (``positions`` (count, 3), else from their
+        specs' paths). Their velocities: over the step ``since = (t0, positions at t0)`` when
+        given (a step's start, so a retried shorter step infers the same motion), else from the
+        motion since the last call. ``orientations`` (count, 4) [w, x, y, z] at t and ``omegas``
+        (count, 3) rad/s over the step: given, or (a table with spinning shapes) from the specs."""
+        if self.count == 0:
+            return
+        _place(self.collider_point, self.collider_vel, self._pose_row(t, positions, since))
         if orientations is not None or omegas is not None or self.rotating:
             qs = [s.orientation_at(t) for s in self.specs] if orientations is None else orientations
             ws = [s.angular_velocity for s in self.specs] if omegas is None else omegas
@@ -584,3 +597,6 @@ class ColliderView(Colliders):
 
     def shown_bounds(self) -> list:
         return self.table.shown_bounds()
+
+    def poses_over(self, control, steps) -> np.ndarray:
+        return self.table.poses_over(control, steps)

@@ -119,8 +119,8 @@ def finalize(model: ti.template(), state: ti.template(), contacts: ti.template()
 
 @ti.func
 def write_moves(model: ti.template(), moves: ti.template(), n_moves):
-    """Pin targets from ``moves``: (≥ n_moves, 4) f64 rows (node, x, y, z), in row order."""
-    ti.loop_config(serialize=True)  # (a node moved twice keeps its last row)
+    """Pin targets from ``moves``: (≥ n_moves, 4) f64 rows (node, x, y, z) naming distinct nodes
+    (a dict's keys: SpringSystem._move_rows), so the rows may be written in any order."""
     for m in range(n_moves):
         node = ti.cast(moves[m, 0], ti.i32)
         for c in ti.static(range(3)):

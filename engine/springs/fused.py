@@ -16,10 +16,15 @@ reductions), and an XPBD colour's springs share no node, so sweeping all springs
 (:func:`~engine.xpbd.constraints.sweep_serial`) is the parallel per-colour sweep exactly. No float
 atomics: the result is the same for any thread count. The per-substep times (α of the pins' lerp,
 t_end) are computed on the host in f64 exactly as the stepped path does and passed as one small
-ndarray (no field write, no extra launch).
+ndarray (no field write, no extra launch). (Against a moving collider the two paths agree to
+rounding, not bit for bit: the same arithmetic compiled into two kernels contracts differently;
+hair's strands parted by 7e-8 m after 37 frames. Each path alone is deterministic, and which one
+runs depends on the scene, never on the thread count.)
 
 Used only when nothing needs the host between substeps (:meth:`SpringSystem._fusable`): CPU
-backend, fixed steps, no stretch limits, colliders that do not move, no energy terms, the springs
+backend, fixed steps, no stretch limits, colliders that do not turn (moving ones are placed from a
+table of their poses over the substeps, computed on the host as it would place them), no rigid
+bodies' shapes, no energy terms, the springs
 accumulated by gather, and at most :data:`MAX_NODES` nodes (beyond that two threads per phase beat
 one; the GPU keeps the launch-by-launch path, whose colour loops are parallel).
 """
@@ -42,10 +47,14 @@ MAX_NODES = 4096
 def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(), contacts: ti.template(),
               x0: ti.template(), v0: ti.template(), bad_t: ti.template(), log: ti.template(),
               times: ti.types.ndarray(), h: ti.f64, begin: ti.i32, moves: ti.types.ndarray(),
-              n_moves: ti.i32, xpbd: ti.template(), x_prev: ti.template(), lam: ti.template(),
-              iterations: ti.i32, segments: ti.template(), A: ti.template()) -> ti.f64:
+              n_moves: ti.i32, poses: ti.types.ndarray(), n_shapes: ti.i32, xpbd: ti.template(),
+              x_prev: ti.template(), lam: ti.template(), iterations: ti.i32, segments: ti.template(),
+              A: ti.template()) -> ti.f64:
     """``moves``: (≥ n_moves, 4) f64 rows (node, x, y, z): pin targets set since the last step
     (a pin path's per-frame move), written here instead of one field write per component.
+    ``poses``: (k, ≥ n_shapes, 6) rows (position, velocity) of the moving colliders' first
+    ``n_shapes`` shapes over each substep (Colliders.poses_over), written before its finalize as
+    the host's ``follow`` would (0: the colliders stay).
     Returns the divergence flag (bad_t) after the run, so the driver needs no read-back launch.
     ``times``: (k, 2) f64, (α, t_end) of each of the k substeps of h to run. ``begin``: 1 at a
     frame's first substep (pinned nodes' pin_start = where they are, as ``begin_frame``).
@@ -85,6 +94,11 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
                     A[slot, i] = gather_node(model, fields, g, X, V, i)
                 for i in range(n):
                     kick_drift_node(X, V, A, i, hh, slot, kick, drifts)
+        if ti.static(contacts.on):
+            for c in range(n_shapes):
+                for d in ti.static(range(3)):
+                    contacts.colliders.collider_point[c][d] = poses[k, c, d]
+                    contacts.colliders.collider_vel[c][d] = poses[k, c, 3 + d]
         for i in range(n):
             finalize_node(model, state, contacts, x0, v0, bad_t, alpha, t_end, h, log, i)
     return bad_t[None]

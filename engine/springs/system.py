@@ -252,8 +252,9 @@ class SpringSystem:
             return False
         if self.model.node_count > fused.MAX_NODES or _arch_in_use() != "cpu":
             return False
-        if self._contacts.on and self.control.colliders_move:
-            return False  # the colliders move between substeps: the host places them
+        if self._contacts.on and self.control.colliders_move and (
+                self.control.colliders_turn or self.colliders.rotating or "rigid" in self.colliders.owners):
+            return False  # the colliders turn between substeps (or a rigid solver places its shapes): the host places them
         if self.integrator == "xpbd":
             return True
         return self.accumulate == "gather" and hasattr(self.stepper, "_segments")
@@ -276,9 +277,15 @@ class SpringSystem:
         else:
             segs = tuple((slot, kick, tuple(drifts)) for slot, kick, drifts in st._segments)
             args = (False, x0, x0, 0, segs, st.a)
+        n_shapes, poses = 0, np.zeros((1, 1, 6), np.float32)
+        if self._contacts.on:
+            poses = np.zeros((1, 1, 6), self.colliders._np)  # (the fields' dtype: one compile)
+            if self.control.colliders_move:  # placed as _post's follow would, step by step
+                poses = self.colliders.poses_over(self.control, [(te - h, te) for _a, te in times])
+                n_shapes = self.colliders.count
         self._bad_seen = fused.run_steps(self.model, self.state, self.fields, self._contacts, x0, v0,
                                          self._bad, self.contact_log, times, h, int(j == 0), self._move_rows(),
-                                         len(self._moves), *args)
+                                         len(self._moves), poses, n_shapes, *args)
         self._moves = {}
         return n - j
 
