@@ -69,6 +69,22 @@ def _place(point: ti.template(), vel: ti.template(), rows: ti.types.ndarray()):
             vel[k][c] = rows[k, 3 + c]
 
 
+@ti.kernel
+def _orient_fields(normal: ti.template(), axis_x: ti.template(), axis_z: ti.template(), omega: ti.template(),
+                   rows: ti.types.ndarray(), boxes: ti.template(), spins: ti.template()):
+    """Normals, box axes (``boxes``) and angular velocities (``spins``) of every shape from rows
+    (n, 12) = (normal, axis x, axis z, ω), in the fields' dtype: one launch where up to four
+    ``from_numpy`` cost ~0.18 ms of Python each (crates' particles place 25 turning shapes a step)."""
+    for k in range(rows.shape[0]):
+        for c in ti.static(range(3)):
+            normal[k][c] = rows[k, c]
+            if ti.static(boxes):
+                axis_x[k][c] = rows[k, 3 + c]
+                axis_z[k][c] = rows[k, 6 + c]
+            if ti.static(spins):
+                omega[k][c] = rows[k, 9 + c]
+
+
 @dataclass
 class ColliderSpec:
     """One shape. ``kind`` is "plane" (point, normal), "sphere" (centre = point, radius), "box"
@@ -211,28 +227,29 @@ class Colliders:
         orientation keeps its configured normal exactly (no rotation arithmetic)."""
         if self.count == 0:
             return
-        nrm = np.zeros((max(1, self.count), 3))
-        rot = np.zeros((max(1, self.count), 3, 3))
-        for k, s in enumerate(self.specs):
-            q = quat_normalize(quats[k])
-            w = np.asarray(omegas[k], np.float64).reshape(3)
+        ws = [np.asarray(omegas[k], np.float64).reshape(3) for k in range(self.count)]
+        for k, w in enumerate(ws):  # (checked before anything is written: a refused call changes nothing)
             if w.any() and not self.spins[k]:
-                raise ValueError(f"angular_velocity: collider {s.name or k!r} was built without rotation "
-                                 f"(give it an angular_velocity or rotates = true); got {w.tolist()}")
-            self._quat[k], self._omega[k] = q, w
-            rot[k] = R = quat_to_matrix(q)
+                raise ValueError(f"angular_velocity: collider {self.specs[k].name or k!r} was built without "
+                                 f"rotation (give it an angular_velocity or rotates = true); got {w.tolist()}")
+        qs = [quat_normalize(quats[k]) for k in range(self.count)]
+        rows = np.zeros((max(1, self.count), 12))  # normal, axis x, axis z, angular velocity
+        for k, s in enumerate(self.specs):
+            q = qs[k]
+            self._quat[k], self._omega[k] = q, ws[k]
+            R = quat_to_matrix(q)
+            rows[k, 3:6], rows[k, 6:9], rows[k, 9:12] = R[:, 0], R[:, 2], ws[k]
             if self.kinds[k] in (CAPSULE, BOX):
-                nrm[k] = R[:, 1]
+                rows[k, 0:3] = R[:, 1]
             else:  # a plane's normal (at its rest orientation exactly as configured)
                 n0 = np.asarray(s.normal, np.float64)
                 n0 = n0 / np.linalg.norm(n0)
-                nrm[k] = n0 if np.array_equal(q, IDENTITY) else R @ n0
-        self.collider_normal.from_numpy(nrm.astype(self._np))
-        if BOX in self.kinds:
-            self.collider_axis_x.from_numpy(np.ascontiguousarray(rot[:, :, 0]).astype(self._np))
-            self.collider_axis_z.from_numpy(np.ascontiguousarray(rot[:, :, 2]).astype(self._np))
-        if self.rotating:
-            self.collider_omega.from_numpy(self._omega.astype(self._np))
+                rows[k, 0:3] = n0 if np.array_equal(q, IDENTITY) else R @ n0
+        boxes = BOX in self.kinds
+        _orient_fields(self.collider_normal, self.collider_axis_x if boxes else self.collider_normal,
+                       self.collider_axis_z if boxes else self.collider_normal,
+                       self.collider_omega if self.rotating else self.collider_normal,
+                       rows.astype(self._np), boxes, self.rotating)
 
     def reset(self) -> None:
         """Back where the specs start, at rest, at t = 0 (a reused scene)."""

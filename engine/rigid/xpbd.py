@@ -98,27 +98,29 @@ class XPBDSolver:
         F = self._fields(C.count)
         nb = F.nb
         mov = m.dynamic & self.awake
-        F.inv_m.from_numpy(_pad(m.body_inv_mass * mov, nb))
-        F.inv_i.from_numpy(_pad(m.body_inv_inertia * mov[:, None], nb))
-        F.moving.from_numpy(_pad(mov.astype(np.int32), nb))
-        for k in "xqvw":
-            getattr(F, k).from_numpy(_pad(getattr(S, k), nb))
+        n = m.count
+        rows = np.zeros((nb, kernel.BODY_COLS))
+        rows[:n, 0] = m.body_inv_mass * mov
+        rows[:n, 1:4] = m.body_inv_inertia * mov[:, None]
+        rows[:n, 4] = mov
+        rows[:n, 5:8], rows[:n, 8:12], rows[:n, 12:15], rows[:n, 15:18] = S.x, S.q, S.v, S.w
         if kinematic is not None:
-            F.kx0.from_numpy(_pad(kinematic[0], nb))
-            F.kx1.from_numpy(_pad(kinematic[1], nb))
+            rows[:n, 18:21], rows[:n, 21:24] = kinematic[0], kinematic[1]
+        F.load_bodies(rows, int(kinematic is not None))
         nc = C.count
         if nc:
-            for k, arr in (("ca", C.a), ("cb", C.b), ("cn", C.n), ("cra", C.ra), ("crb", C.rb),
-                           ("rnd_a", C.round_a), ("rnd_b", C.round_b), ("mu", C.mu), ("e", C.e)):
-                getattr(F, k).from_numpy(_pad(arr, F.capacity))
+            c = np.empty((nc, kernel.CONTACT_COLS))
+            c[:, 0], c[:, 1], c[:, 2:5], c[:, 5:8], c[:, 8:11] = C.a, C.b, C.n, C.ra, C.rb
+            c[:, 11], c[:, 12], c[:, 13], c[:, 14] = C.round_a, C.round_b, C.mu, C.e
+            F.load_contacts(c)
         g = np.asarray(g, np.float64)
         glen, hs = float(np.linalg.norm(g)), h / substeps
         F.substeps(substeps, hs, g.tolist(), glen, nc, self.nj)
-        n = m.count
-        for k in "xqvw":
-            getattr(S, k)[:] = getattr(F, k).to_numpy()[:n]
+        out, lam = np.empty((n, 13)), np.empty(max(1, nc))
+        F.store(out, lam)
+        S.x[:], S.q[:], S.v[:], S.w[:] = out[:, 0:3], out[:, 3:7], out[:, 7:10], out[:, 10:13]
         if nc:
-            C.lam[:] = F.lam.to_numpy()[:nc]
+            C.lam[:] = lam[:nc]
 
 
 def _pad(a, n):
