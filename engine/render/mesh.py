@@ -87,7 +87,8 @@ class MeshLayer:
         visibility buffer and line sums, then shade the touched tiles into ``t.fbg``/``t.fdep``."""
         k = self._k
         W, H, TX = t.W, t.H, t.TX
-        k["clear"](t.vis, t.lines, t.dirty, t.dirty_prev, H, W, t.TX * t.TY)
+        k["clear"](t.vis, t.lines, t.dirty, t.dirty_prev, H, W, TX, t.TX * t.TY, int(not t.mesh_clean))
+        t.mesh_clean = True
         if self.tri_count:
             k["tris"](t.vis, t.dirty, *cam, W, H, TX)
         if self.line_count:
@@ -128,14 +129,19 @@ def _build(m: MeshLayer):
 
     @ti.kernel
     def clear(vis: ND_I64, lines: ND_I4, dirty: ND_I1, dirty_prev: ND_I1, H: ti.i32, W: ti.i32,
-              T: ti.i32):
-        for t in range(T):  # tiles touched last frame are rewritten (restored) this frame too
+              TX: ti.i32, T: ti.i32, whole: ti.i32):
+        """Empty the visibility and line buffers where the last frame wrote them (the tiles it
+        marked dirty: nothing writes them elsewhere), or everywhere (``whole``: new buffers);
+        those tiles become ``dirty_prev``, rewritten (restored) this frame too."""
+        for t in range(T):
+            if whole != 0 or dirty[t] != 0:
+                px0, py0 = (t % TX) * TILE, (t // TX) * TILE
+                for py in range(py0, ti.min(H, py0 + TILE)):
+                    for k in range(py * W + px0, py * W + ti.min(W, px0 + TILE)):
+                        vis[k] = ti.i64(EMPTY)
+                        lines[k] = ti.Vector([0, 0, 0, 0])
             dirty_prev[t] = dirty[t]
             dirty[t] = 0
-        for y in range(H):
-            for k in range(y * W, y * W + W):
-                vis[k] = ti.i64(EMPTY)
-                lines[k] = ti.Vector([0, 0, 0, 0])
 
     @ti.kernel
     def tris(vis: ND_I64, dirty: ND_I1, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32,

@@ -173,11 +173,14 @@ class Renderer:
             self.mesh.update()
             self.mesh.draw(t, cam)
             bgc, dep = t.fbg, t.fdep
-        if t.has_lo and (rect is not None or self.mesh is not None):
+        if t.has_lo:  # the reduced depth where the full one changed: the redrawn rectangle, the bodies' tiles
             k = round(1 / t.scale)
-            lo = (0, 0, t.Wl, t.Hl) if self.mesh is not None or rect is None else \
-                (rect[0] // k, rect[1] // k, min(t.Wl, -(-rect[2] // k)), min(t.Hl, -(-rect[3] // k)))
-            downsample_depth(dep, W, H, t.Wl, t.Hl, k, *lo)
+            prev = t.dirty_prev if self.mesh is not None else t.dirty
+            if rect is not None:
+                lo = (rect[0] // k, rect[1] // k, min(t.Wl, -(-rect[2] // k)), min(t.Hl, -(-rect[3] // k)))
+                downsample_depth(dep, W, H, t.Wl, t.Hl, k, *lo, t.dirty, prev, t.TX, 0)
+            if self.mesh is not None:
+                downsample_depth(dep, W, H, t.Wl, t.Hl, k, 0, 0, t.Wl, t.Hl, t.dirty, prev, t.TX, 1)
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:

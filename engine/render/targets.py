@@ -76,6 +76,7 @@ class FrameTargets:
             self.fdep = ti.ndarray(ti.f32, shape=both)
             self.dirty_prev = ti.ndarray(ti.i32, shape=self.T0)
             self.dirty_prev.fill(0)
+            self.mesh_clean = False  # vis and lines not yet emptied (the first draw empties them whole)
         self.bg_key = None  # the view (camera, show) the background arrays were drawn for
         self.bg_shapes = None  # the shown colliders' poses they were drawn with (Renderer._background_rect)
         self.packed_key = None  # (exposure, mode) of bg_packed (redrawn with the background)
