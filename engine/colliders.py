@@ -215,6 +215,8 @@ class Colliders:
                                           else float(s.half_length) + float(s.radius))
             self._pos[k] = s.position_at(0.0)
         self.collider_point.from_numpy(self._pos)
+        self._orient_keys = [None] * self.count  # what each shape's row below was made from
+        self._orient_rows = np.zeros((max(1, self.count), 12))
         self._orient([s.orientation_at(0.0) for s in self.specs], [s.angular_velocity for s in self.specs])
         self._t = 0.0
         self._band = contact_band(dtype)
@@ -227,15 +229,22 @@ class Colliders:
         orientation keeps its configured normal exactly (no rotation arithmetic)."""
         if self.count == 0:
             return
+        # a shape whose orientation and ω are what they were at the last call keeps its row (resting
+        # bodies published as shapes: most of a pile's, a step after step); the row is a function
+        # of those inputs and the spec alone, so reusing it is exact
         ws = [np.asarray(omegas[k], np.float64).reshape(3) for k in range(self.count)]
-        for k, w in enumerate(ws):  # (checked before anything is written: a refused call changes nothing)
-            if w.any() and not self.spins[k]:
+        keys = [np.asarray(quats[k], np.float64).tobytes() + ws[k].tobytes() for k in range(self.count)]
+        todo = [k for k in range(self.count) if keys[k] != self._orient_keys[k]]
+        for k in todo:  # (checked before anything is written: a refused call changes nothing)
+            if ws[k].any() and not self.spins[k]:
                 raise ValueError(f"angular_velocity: collider {self.specs[k].name or k!r} was built without "
-                                 f"rotation (give it an angular_velocity or rotates = true); got {w.tolist()}")
-        qs = [quat_normalize(quats[k]) for k in range(self.count)]
-        rows = np.zeros((max(1, self.count), 12))  # normal, axis x, axis z, angular velocity
-        for k, s in enumerate(self.specs):
-            q = qs[k]
+                                 f"rotation (give it an angular_velocity or rotates = true); got {ws[k].tolist()}")
+        qs = {k: quat_normalize(quats[k]) for k in todo}
+        if not todo:
+            return
+        rows = self._orient_rows  # normal, axis x, axis z, angular velocity
+        for k in todo:
+            s, q = self.specs[k], qs[k]
             self._quat[k], self._omega[k] = q, ws[k]
             R = quat_to_matrix(q)
             rows[k, 3:6], rows[k, 6:9], rows[k, 9:12] = R[:, 0], R[:, 2], ws[k]
@@ -245,6 +254,7 @@ class Colliders:
                 n0 = np.asarray(s.normal, np.float64)
                 n0 = n0 / np.linalg.norm(n0)
                 rows[k, 0:3] = n0 if np.array_equal(q, IDENTITY) else R @ n0
+            self._orient_keys[k] = keys[k]
         boxes = BOX in self.kinds
         _orient_fields(self.collider_normal, self.collider_axis_x if boxes else self.collider_normal,
                        self.collider_axis_z if boxes else self.collider_normal,

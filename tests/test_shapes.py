@@ -243,6 +243,38 @@ def test_a_rigid_bodys_shape_is_named_as_the_body():
     assert len(m) == 1 and m.a_name.tolist() == ["sparks"] and m.collider_name.tolist() == ["crate"]
 
 
+@pytest.mark.slow  # (the default run is near its 5 minutes)
+def test_a_table_reorients_only_shapes_that_turned_and_a_refusal_writes_no_orientation():
+    """Colliders._orient keeps the row of a shape whose orientation and ω did not change: after
+    moves where some shapes turn and others rest, the fields hold the bytes a fresh table given
+    the same pose holds; a refused ω (a shape built without rotation) writes no orientation."""
+    from engine.colliders import Colliders, ColliderSpec
+
+    specs = [ColliderSpec("box", point=(0, 1, 0), half_extents=(0.3, 0.2, 0.5), rotates=True),
+             ColliderSpec("capsule", point=(1, 1, 0), radius=0.1, half_length=0.3, rotates=True),
+             ColliderSpec("plane", point=(0, 0, 0), normal=(0.1, 1, 0))]
+    pos, I = [[0, 1, 0], [1, 1, 0], [0, 0, 0]], [1.0, 0.0, 0.0, 0.0]
+    qa, qb = quat_from_rotvec([0.3, 0.2, 0.1]), quat_from_rotvec([0.0, 0.0, 0.5])
+    poses = [([qa, I, I], [[0, 0, 1], [0, 0, 0], [0, 0, 0]]),  # the box turns
+             ([qa, qb, I], [[0, 0, 1], [0, 0, 0], [0, 0, 0]]),  # the capsule turns, the box rests
+             ([qb, qb, I], [[0, 0, 0], [1, 0, 0], [0, 0, 0]])]
+
+    def fields(t):
+        return [f.to_numpy() for f in (t.collider_normal, t.collider_axis_x, t.collider_axis_z, t.collider_omega)]
+
+    table = Colliders(specs)
+    for k, (qs, ws) in enumerate(poses):
+        table.move_to(0.1 * (k + 1), pos, orientations=qs, omegas=ws)
+        fresh = Colliders(specs)
+        fresh.move_to(0.1 * (k + 1), pos, orientations=qs, omegas=ws)
+        assert all(np.array_equal(a, b) for a, b in zip(fields(table), fields(fresh))), k
+        assert np.array_equal(table._quat, fresh._quat) and np.array_equal(table._omega, fresh._omega)
+    before, quat = fields(table), table._quat.copy()
+    with pytest.raises(ValueError, match="angular_velocity: collider 2 was built without rotation"):
+        table.move_to(0.5, pos, orientations=[qa, qa, I], omegas=[[0, 0, 0], [0, 0, 0], [0, 1, 0]])
+    assert all(np.array_equal(a, b) for a, b in zip(fields(table), before)) and np.array_equal(table._quat, quat)
+
+
 def test_a_collider_built_without_rotation_cannot_be_spun(spheres):
     s, _rows = spheres
     with pytest.raises(ValueError, match=r"^set_collider_pose: angular_velocity \[0, 1, 0\] is not allowed: "
