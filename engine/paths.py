@@ -28,6 +28,16 @@ def sample_path(path: Sequence, t: float, default: Sequence[float]) -> np.ndarra
     if not len(path):
         return np.asarray(default, np.float64)
     if not isinstance(path, Path):
+        if len(path) == 2:  # a two-keyframe motion (a pose set from code, a rigid body's shape over
+            # a step: several a step each): the same arithmetic without building arrays first
+            (t0, p0), (t1, p1) = path
+            t0, t1 = float(t0), float(t1)
+            if t <= t0:
+                return np.array(p0, np.float64).reshape(3)
+            if t >= t1:
+                return np.array(p1, np.float64).reshape(3)
+            a = (t - t0) / (t1 - t0)
+            return (1 - a) * np.asarray(p0, np.float64).reshape(3) + a * np.asarray(p1, np.float64).reshape(3)
         path = Path(path)
     times, pts = path.times, path.points
     if t <= times[0]:

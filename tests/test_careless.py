@@ -286,8 +286,16 @@ def test_a_long_path_is_read_once_not_every_step(monkeypatch):
     for k in range(500):
         p = ems[0].position_at(k * 0.05)
     assert reads == []
-    assert sample_path([(0.0, (0, 0, 0)), (1.0, (1, 0, 0))], 0.5, (0, 0, 0)).tolist() == [0.5, 0, 0]
-    assert reads == [2]  # (the counter counts: a plain list is read into a Path)
+    assert sample_path([(0.0, (0, 0, 0)), (1.0, (1, 0, 0)), (2.0, (1, 1, 0))], 0.5, (0, 0, 0)).tolist() == [0.5, 0, 0]
+    assert reads == [3]  # (the counter counts: a plain list is read into a Path)
+    # two keyframes (a pose set from code) are sampled without arrays, to the same bytes
+    rng = np.random.default_rng(1)
+    for _ in range(2000):
+        t0 = float(rng.normal())
+        keys = [(t0, tuple(rng.normal(size=3))), (t0 + float(abs(rng.normal())) * (rng.random() > 0.1),
+                                                  list(rng.normal(size=3)))]
+        t = float(rng.normal())
+        assert np.array_equal(sample_path(keys, t, (9, 9, 9)), sample_path(Path(keys), t, (9, 9, 9)))
     assert p.tolist() == pytest.approx([0.0, 1.0, 499 * 0.05 * 1e-3], abs=1e-9)
     short = [(0.0, (0.0, 0.0, 0.0)), (1.0, (2.0, 0.0, 0.0))]
     assert sample_path(short, 0.25, (9, 9, 9)).tolist() == [0.5, 0.0, 0.0]
