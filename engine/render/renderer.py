@@ -32,6 +32,8 @@ from .targets import FrameTargets, packed_view
 SCHEDULES = ("tiles", "pixels")
 MAX_SIZES_KEPT = 4  # image sizes whose buffers a Renderer keeps (least recently used dropped)
 RESOLUTIONS = {"auto": None, "1": 1.0, "0.5": 0.5, "0.25": 0.25}
+
+
 def screen_box(cam, centre, radius: float, W: int, H: int):
     """The pixel rectangle (x0, y0, x1, y1), clamped to the W×H image, that holds every pixel whose
     ray (engine.render.background.ray_dir) meets the sphere (centre, radius) seen by ``cam`` = (o,
