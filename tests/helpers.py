@@ -56,3 +56,10 @@ def on_thread_counts(source: str, *args, counts=(1, 2), timeout: float = 600):
             assert r.returncode == 0, r.stderr[-2000:]
             out.append(r.stdout.split())
     return out
+
+
+def one_line(e):
+    """The text of a caught exception (``pytest.raises``' info), asserted to be one short line."""
+    text = str(e.value)
+    assert "\n" not in text and len(text) < 400, text
+    return text
