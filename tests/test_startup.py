@@ -1,0 +1,88 @@
+"""Start-up: what a warm start rests on.
+
+* ``particles run`` leaves the kernels it compiled in Taichi's offline cache (engine.runtime's
+  exit hook: without it the process ended without Taichi's teardown, wrote nothing, and every
+  run started cold — 11 s for sparks' first frame instead of ~3);
+* the source positions Taichi formats for every node it builds are memoised, and the text is
+  the same as Taichi's own (it is what a kernel's compile error shows).
+"""
+import ast
+import inspect
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+import taichi as ti
+
+from engine import runtime
+
+from helpers import ROOT
+
+
+def _cache_files(folder):
+    return sorted(f for f in os.listdir(folder) if f.endswith(".tic"))
+
+
+@pytest.mark.slow
+def test_run_leaves_its_kernels_in_the_offline_cache(tmp_path):
+    cache = tmp_path / "ticache"
+    cache.mkdir()
+    env = dict(os.environ, PARTICLES_TI_CACHE=str(cache), TI_SKIP_VERSION_CHECK="ON")
+    cmd = [sys.executable, "-m", "engine", "run", os.path.join(ROOT, "configs", "sparks.toml"),
+           "--frames", "1", "--out", str(tmp_path / "out"), "--overwrite", "--quiet"]
+    first = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr
+    kept = _cache_files(cache)
+    assert len(kept) > 20  # sparks' step and render kernels (54 on Taichi 1.7.4)
+    again = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert _cache_files(cache) == kept  # the second run compiled nothing new: every kernel hit
+
+
+def test_memoised_source_positions_are_taichis_text():
+    from taichi.lang.ast import ast_transformer_utils as atu
+
+    memo = atu.ASTTransformerContext.get_pos_info
+    assert getattr(memo, "memoized", False)  # installed by runtime.init
+
+    def bad(a):
+        b = a + 1
+        for i in range(3):
+            if b > i:
+                b = b * 2 + undefined_name  # noqa: F821
+        return b
+
+    src, start = inspect.getsourcelines(bad)
+
+    class Ctx:  # what get_pos_info reads of Taichi's context
+        file, lineno_offset, indent = __file__, start - 1, 4
+        src = [line.rstrip("\n") for line in inspect.getsourcelines(bad)[0]]
+        func = type("F", (), {"func": bad})()
+
+    ctx = Ctx()
+    nodes = [n for n in ast.walk(ast.parse(textwrap.dedent("".join(src))))
+             if isinstance(n, (ast.stmt, ast.expr))]
+    assert len(nodes) > 15
+    for n in nodes:
+        want = memo.original(ctx, n)
+        assert "line" in want and "^" in want
+        assert memo(ctx, n) == want
+        assert memo(ctx, n) == want  # the kept text, the second time
+
+
+def test_a_kernel_error_still_points_at_its_line():
+    x = ti.field(ti.f32, shape=4)
+
+    @ti.kernel
+    def broken():
+        for i in x:
+            x[i] = x[i] + not_defined_anywhere  # noqa: F821
+
+    with pytest.raises(Exception) as e:
+        broken()
+    text = str(e.value)
+    assert "not_defined_anywhere" in text
+    assert "^" in text  # the caret line under the node
+    runtime.check_thread("test")  # the program is still ours and usable
