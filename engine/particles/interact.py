@@ -18,7 +18,8 @@ After the integrator's step (forces, colliders) the pool's step calls :meth:`Int
     C_i = ρ_i/ρ₀ − 1 (eq. 1, clamped at 0 so a free surface is not pulled inward), λ_i (eq. 11 with
     the relaxation ε), Δp_i (eq. 14) with the artificial pressure s_corr (eq. 13, k = 0.1, Δq = 0.2h,
     n = 4); rest spacing s = 2·radius, kernel support h = 2s, m = 1 and ρ₀ the kernel sum over a cubic
-    lattice of spacing s, so a lattice at spacing s is exactly at rest density;
+    lattice of spacing s, so a lattice at spacing s is exactly at rest density (the terms:
+  :mod:`engine.particles.fluid`);
   - ``repel``: one soft push apart of pairs closer than 2·radius (a fraction REPEL of the overlap);
 - the velocities take the corrections, v += Δx/h (the PBD velocity update v = (x* − x)/h);
 - fluid: XSPH viscosity (eq. 17), vorticity confinement (eqs. 15–16) and a surface-tension term
@@ -37,6 +38,7 @@ import taichi as ti
 
 from ..geometry.grid import HashGrid, NeighbourLists
 from . import pm
+from .fluid import FLUID_EPS, S_CORR_DQ, S_CORR_K, FluidTerms, lattice_constants, poly6
 from .pm import AUTO_DIRECT
 
 KINDS = {"granular": 1, "fluid": 2, "gravity": 3, "repel": 4}
@@ -48,40 +50,8 @@ GRANULAR_RELAX = 0.5  # Jacobi relaxation: a fixed factor (not 1/contact count: 
 # a bound in the spirit of Macklin et al. 2014's pre-stabilisation (§4.4); resting piles never reach it
 GRANULAR_MAX_SPEED = 0.1
 REPEL = 0.25  # fraction of a repel overlap removed per step (soft)
-S_CORR_K, S_CORR_DQ, S_CORR_N = 0.1, 0.2, 4  # Macklin & Müller 2013, §4 (k, Δq/h, n)
-FLUID_EPS = 0.01  # λ relaxation ε, as a fraction of the lattice's Σ|∇C|²
-
-
-def poly6(r, h):
-    """Müller et al. 2003's poly6 kernel W(r, h), 1/m³."""
-    return 315.0 / (64.0 * math.pi * h ** 9) * (h * h - r * r) ** 3 if r < h else 0.0
-
-
-def spiky_grad(r, h):
-    """|∇W_spiky(r, h)|, 1/m⁴ (the gradient points along −r̂)."""
-    return 45.0 / (math.pi * h ** 6) * (h - r) ** 2 if 0 < r < h else 0.0
-
-
-def lattice_constants(s, h):
-    """ρ₀ = Σ W over a cubic lattice of spacing s (self included) and G₀ = Σ_k |∇_k C|² there
-    (the denominator of λ at rest), both with m = 1."""
-    n = int(math.ceil(h / s))
-    rho, grads = 0.0, []
-    for a in range(-n, n + 1):
-        for b in range(-n, n + 1):
-            for c in range(-n, n + 1):
-                r = s * math.sqrt(a * a + b * b + c * c)
-                rho += poly6(r, h)
-                if r > 0:
-                    g = spiky_grad(r, h)
-                    grads.append(np.array([a, b, c], float) * s / r * g)
-    grads = np.array(grads) / rho
-    g0 = float((grads ** 2).sum() + (grads.sum(0) ** 2).sum())
-    return rho, g0
-
-
 @ti.data_oriented
-class Interactions:
+class Interactions(FluidTerms):
     """The interactions of one scene's pool (built once; kernels compiled for the kinds present).
 
     ``configs``: the emitter configs (their ``interact`` tables; emitters of one kind share one
@@ -208,22 +178,6 @@ class Interactions:
             self.press[i] = 0.0
 
     @ti.func
-    def _w(self, r2):
-        h2 = self.f_h * self.f_h
-        w = 0.0
-        if r2 < h2:
-            w = 315.0 / (64.0 * math.pi * self.f_h ** 9) * (h2 - r2) ** 3
-        return w
-
-    @ti.func
-    def _gw(self, r, d):
-        """∇W_spiky at r (|r| = d > 0): −45/(π h⁶)(h − d)² r̂."""
-        g = ti.Vector([0.0, 0.0, 0.0])
-        if 0.0 < d < self.f_h:
-            g = -45.0 / (math.pi * self.f_h ** 6) * (self.f_h - d) ** 2 / d * r
-        return g
-
-    @ti.func
     def _granular(self, i, h):
         S = self.state
         xi = S.particle_pos[i]
@@ -268,46 +222,6 @@ class Interactions:
             d = ti.sqrt(d2)
             dx += 0.5 * REPEL * (self.r_d - d) / d * r
 
-    @ti.func
-    def _fluid_lambda(self, i):
-        """λ_i = −C_i / (Σ_k |∇_k C_i|² + ε) (Macklin & Müller 2013, eqs. 1, 8–11)."""
-        xi = self.state.particle_pos[i]
-        rho = self._w(0.0)
-        gi = ti.Vector([0.0, 0.0, 0.0])
-        sq = 0.0
-        self.lists.visit(i, self.slot_kind, 2, self._density_pair, (xi, rho, gi, sq))
-        C = ti.max(rho / self.f_rho0 - 1.0, 0.0)
-        return -C / (sq + gi.dot(gi) + self.f_eps)
-
-    @ti.func
-    def _density_pair(self, j, xi, rho: ti.template(), gi: ti.template(), sq: ti.template()):
-        """Fluid slot j's share of the density at xi (rho), of ∇_i C (gi) and of Σ|∇_j C|² (sq)."""
-        r = xi - self.state.particle_pos[j]
-        d2 = r.dot(r)
-        if d2 < self.f_h * self.f_h:
-            rho += self._w(d2)
-            g = self._gw(r, ti.sqrt(d2)) / self.f_rho0
-            gi += g
-            sq += g.dot(g)
-
-    @ti.func
-    def _fluid_delta(self, i):
-        """Δp_i = (1/ρ₀) Σ_j (λ_i + λ_j + s_corr) ∇W(p_i − p_j) (eq. 14; s_corr eq. 13)."""
-        xi = self.state.particle_pos[i]
-        li = self.lam[i]
-        dx = ti.Vector([0.0, 0.0, 0.0])
-        self.lists.visit(i, self.slot_kind, 2, self._delta_pair, (xi, li, dx))
-        return dx / self.f_rho0
-
-    @ti.func
-    def _delta_pair(self, j, xi, li, dx: ti.template()):
-        r = xi - self.state.particle_pos[j]
-        d2 = r.dot(r)
-        if 0.0 < d2 < self.f_h * self.f_h:
-            q = self._w(d2) / self.f_wdq
-            s_corr = -self.f_scorr * q ** S_CORR_N
-            dx += (li + self.lam[j] + s_corr) * self._gw(r, ti.sqrt(d2))
-
     @ti.kernel
     def sweep(self, h: ti.f32):
         """One Jacobi sweep: every member's Δx from its neighbours' positions, then applied."""
@@ -343,63 +257,6 @@ class Interactions:
                 S.particle_pos[i] = x
                 self.corr[i] = x - self.x_pre[i]
                 self.lists.moved(i, x)
-
-    @ti.func
-    def _fluid_velocity(self, i, h):
-        """XSPH (eq. 17, normalised by ρ₀), vorticity confinement (eq. 16: ε (N × ω), ε in m/s) and
-        Akinci's cohesion (γ in m/s² at the kernel's peak) for fluid slot i; the new velocity."""
-        S = self.state
-        xi, vi, wi = S.particle_pos[i], S.particle_vel[i], self.omega[i]
-        xs = ti.Vector([0.0, 0.0, 0.0])
-        eta = ti.Vector([0.0, 0.0, 0.0])
-        st = ti.Vector([0.0, 0.0, 0.0])
-        self.lists.visit(i, self.slot_kind, 2, self._velocity_pair, (xi, vi, wi, xs, eta, st))
-        v = vi + self.f_visc * xs / self.f_rho0
-        if ti.static(self.f_vort > 0):
-            en = eta.norm()
-            if en > 1e-12:
-                v += h * self.f_vort * (eta / en).cross(wi)
-        if ti.static(self.f_tension > 0):
-            v += h * self.f_tension * st
-        return v
-
-    @ti.func
-    def _velocity_pair(self, j, xi, vi, wi, xs: ti.template(), eta: ti.template(), st: ti.template()):
-        """Fluid slot j's terms for the slot at xi (velocity vi, vorticity wi): XSPH into xs, the
-        vorticity's gradient into eta, Akinci's cohesion into st."""
-        S = self.state
-        hk = self.f_h
-        r = xi - S.particle_pos[j]
-        d2 = r.dot(r)
-        if 0.0 < d2 < hk * hk:
-            d = ti.sqrt(d2)
-            xs += (S.particle_vel[j] - vi) * self._w(d2)
-            if ti.static(self.f_vort > 0):
-                eta += (self.omega[j].norm() - wi.norm()) * self._gw(r, d)
-            if ti.static(self.f_tension > 0):
-                cr = 0.0
-                if 2.0 * d > hk:
-                    cr = (hk - d) ** 3 * d ** 3
-                else:
-                    cr = 2.0 * (hk - d) ** 3 * d ** 3 - hk ** 6 / 64.0
-                st -= (32.0 / (math.pi * hk ** 9) * cr / self.f_cmax) * (r / d)
-
-    @ti.func
-    def _vorticity(self, i):
-        """ω_i = Σ_j v_ij × ∇_j W(p_i − p_j) / ρ₀ (eq. 15), 1/s."""
-        S = self.state
-        xi, vi = S.particle_pos[i], S.particle_vel[i]
-        w = ti.Vector([0.0, 0.0, 0.0])
-        self.lists.visit(i, self.slot_kind, 2, self._vorticity_pair, (xi, vi, w))
-        return w / self.f_rho0
-
-    @ti.func
-    def _vorticity_pair(self, j, xi, vi, w: ti.template()):
-        S = self.state
-        r = xi - S.particle_pos[j]
-        d2 = r.dot(r)
-        if 0.0 < d2 < self.f_h * self.f_h:
-            w += (S.particle_vel[j] - vi).cross(-self._gw(r, ti.sqrt(d2)))
 
     @ti.func
     def _gravity(self, i):

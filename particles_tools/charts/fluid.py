@@ -10,7 +10,7 @@ spacing s = 0.03 m) dropped as a seeded random block at the rest number density:
 Each runs T = 1.5 s at 30 frames/s for every (iterations, h). The density is measured in NumPy,
 float64, from the positions the solver leaves at each frame: ρ_i = Σ_j W_poly6(|x_i − x_j|, 2s)
 (self included), over ρ₀ = the kernel sum over a cubic lattice of spacing s — the solver's own
-kernel, support and rest density (:func:`engine.particles.interact.lattice_constants`). The error
+kernel, support and rest density (:func:`engine.particles.fluid.lattice_constants`). The error
 is the compression max(ρ/ρ₀ − 1, 0) (surface particles are under-dense by construction; the solver's
 constraint is clamped the same way), its mean and its max over the particles, averaged over the
 frames of the last 0.5 s. Work: particle-iterations per simulated second, N · iterations / h.
@@ -71,7 +71,7 @@ def scene_config(scene: str, iterations: int, h: float, seconds: float = T) -> d
 def relative_density(x: np.ndarray, radius: float = RADIUS) -> np.ndarray:
     """ρ_i/ρ₀ for each of the points ``x`` (N, 3), in float64, with the fluid solver's kernel:
     poly6 of support 2s (s = 2·radius), m = 1, self included, ρ₀ its lattice sum at spacing s."""
-    from engine.particles.interact import lattice_constants, poly6
+    from engine.particles.fluid import lattice_constants, poly6
 
     s = 2.0 * radius
     hk = 2.0 * s
