@@ -28,7 +28,9 @@ import numpy as np
 
 from . import checks, reuse, runtime
 from .budget import fit, hold, particle_budget, release, set_particle_budget
+from .api_potential import PotentialAPI
 from .api_rigid import RigidAPI
+from .api_soft import SoftBodyAPI
 from .builder import ConfigBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
 from .particles.capacity import MAX_POOL
@@ -70,7 +72,7 @@ def _discard(key, scene, token, program) -> None:
     reuse.give_back(key, scene, program)
 
 
-class ParticleScene(RigidAPI):
+class ParticleScene(RigidAPI, SoftBodyAPI, PotentialAPI):
     """A scene driven from Python. Build with :meth:`from_file`, :meth:`from_dict` or
     :class:`SceneBuilder`. Several can live in one process; ``engine.runtime.init`` is called
     once for all of them (or skipped when the host initialised Taichi itself).
@@ -306,102 +308,6 @@ class ParticleScene(RigidAPI):
         """Gravity (m/s²) for particles and soft bodies."""
         self._live("set_gravity").control.set_gravity(vector("set_gravity: g", g))
 
-    def _body(self, where: str, name):
-        bodies = self._live(where).bodies
-        names = [b.cfg.name for b in bodies]
-        return bodies[names.index(checks.name(f"{where}: body", name, names, "body"))]
-
-    def _node(self, where: str, body, node) -> int:
-        return integer(f"{where}: node", node, 0, body.node_count - 1)
-
-    def pin(self, body: str, node: int, target=None) -> None:
-        """Hold a node of a soft body at ``target`` (default: where it is), from the next step."""
-        b = self._body("pin", body)
-        n = self._node("pin", b, node)
-        t = None if target is None else vector("pin: target", target)
-        self.scene.control.pin(b.index, n, t)
-
-    def move_pin(self, body: str, node: int, target) -> None:
-        """Drag a pinned node to ``target`` over the next step (a hand holding the cloth)."""
-        b = self._body("move_pin", body)
-        n, t = self._node("move_pin", b, node), vector("move_pin: target", target)
-        self.scene.control.move_pin(b.index, n, t)
-
-    def release(self, body: str, node: int) -> None:
-        b = self._body("release", body)
-        self.scene.control.release(b.index, self._node("release", b, node))
-
-    def add_energy(self, body: str, energy, nodes, params=None, name: str = "user") -> None:
-        """Attach a user energy to soft body ``body``: ``energy`` a ``@ti.func`` (x, p) → ψ (J) of
-        an element's k nodes (x: 3 × k matrix of positions, m; p: its row of ``params``),
-        ``nodes`` (E, k) node indices. Forces are −∇ψ by Taichi autodiff, deterministic
-        (engine.forces.user); the energy is reported under ``name`` by :meth:`energy`. A k = 1
-        energy over every node is an external potential U(x) (a well, a terrain). Kept until the
-        scene is rebuilt (add_body, remove_body…)."""
-        self._body("add_energy", body).add_energy(energy, nodes, params, name)
-
-    def add_potential(self, potential, params=None, emitters=None, name: str = "potential") -> None:
-        """Let an external potential U(x, p) act on particles: ``potential`` a ``@ti.func`` of x
-        (a 3-vector, m) and p (the vector of ``params``: a 1-D sequence of 1 to 16 finite floats,
-        default [0.0]) returning U in J/kg, so a particle accelerates by a = −∇U(x) (a well, a
-        terrain); ``emitters``: the names of the emitters whose particles it acts on (a name or a
-        list; None: all, those added later included); ``name`` labels it in :meth:`potential_energy`.
-
-        Forces by Taichi autodiff, deterministic (engine.particles.potential): one gradient per
-        half kick, v −= (h/2)∇U before and after each particle step (Strang splitting: second
-        order, symplectic with the symplectic inner methods; with rk4 or step doubling the
-        potential's part stays second order, and an adaptive step is capped at ``solver.h``).
-        Costs two gradient evaluations (three launches each) a step, and fixed steps are no longer
-        fused into runs. Its kernels compile here; a potential Taichi cannot compile is refused
-        (ValueError), as is a gradient that turns non-finite at a particle (the step raises
-        SimulationDiverged naming it). Kept across rebuilds (add_emitter, add_collider…; each
-        compiles it again) until the scene is closed."""
-        where = "add_potential"
-        s = self._live(where)
-        from .particles.potential import check_function, check_params
-
-        check_function(where, potential)
-        p = check_params(where, params)
-        known = [e.name for e in self.cfg.emitters]
-        if emitters is None:
-            chosen = None
-        else:
-            items = [emitters] if isinstance(emitters, str) else emitters
-            if not isinstance(items, (list, tuple)) or not items:
-                raise ValueError(f"{where}: emitters: {checks.show(emitters)} is not an emitter name or a "
-                                 f"non-empty list of them")
-            chosen = tuple(dict.fromkeys(checks.name(f"{where}: emitters", e, known, "emitter") for e in items))
-        taken = [q[3] for q in self._potentials]
-        if not isinstance(name, str) or not name or name in taken:
-            raise ValueError(f"{where}: name: {checks.show(name)} is not allowed: a non-empty str no other "
-                             f"potential has (taken: {', '.join(map(repr, taken)) or 'none'})")
-        if s.particles is None or not s.particles.layout.capacity:
-            raise ValueError(f"{where}: the scene has no particles (no emitters) to act on")
-        spec = (potential, p, chosen, name)
-        self._attach(where, s, spec)
-        self._potentials.append(spec)
-
-    def _attach(self, where: str, s: Scene, spec) -> None:
-        """Compile potential ``spec`` (function, params, emitter names or None, name) into scene
-        ``s``'s particles; a compile error is one ValueError line and nothing is added."""
-        import taichi as ti
-
-        potential, p, chosen, name = spec
-        names = [e.name for e in self.cfg.emitters]
-        rows = None if chosen is None else [names.index(n) for n in chosen]
-        try:
-            s.particles.add_potential(potential, p, rows, name)
-        except (ti.TaichiCompilationError, RuntimeError) as e:  # (type errors: RuntimeError from C++)
-            first = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
-            raise ValueError(f"{where}: potential: Taichi could not compile "
-                             f"{getattr(potential, '__name__', 'it')}(x, p) -> scalar: {first}") from None
-
-    def potential_energy(self) -> dict:
-        """{name: Σ U(x_i)} over the born particles each potential acts on (J/kg: particles have
-        unit mass); {} without potentials. One kernel pair and a read-back per potential."""
-        s = self._live("potential_energy")
-        return s.particles.energy() if s.particles is not None else {}
-
     # -- read-back --------------------------------------------------------------------------------
     def particles(self) -> dict:
         """Live particles as NumPy arrays (copies; Taichi fields are not shared memory on every
@@ -420,16 +326,6 @@ class ParticleScene(RigidAPI):
                 for c in range(3):
                     col[sel, c] = np.interp(t[sel], stops[:, 0], stops[:, 1 + c])
         return col
-
-    def body_positions(self, name: str) -> np.ndarray:
-        """(N, 3) float32 node positions of body ``name`` (m)."""
-        return self._body("body_positions", name).positions()
-
-    def energy(self) -> dict:
-        """Per soft body: kinetic, gravitational and every energy term by name (spring, bending,
-        area, volume, the solid's material, user energies) and their total (J). Particles'
-        external potentials report in :meth:`potential_energy`."""
-        return {b.cfg.name or f"body{k}": b.energy() for k, b in enumerate(self._live("energy").bodies)}
 
     def contacts(self, min_speed: float = 0.0, body: str | None = None) -> Contacts:
         """Every contact since the previous call (the queue drains), however many steps ran,
