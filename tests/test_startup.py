@@ -13,6 +13,7 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 import taichi as ti
 
@@ -51,7 +52,7 @@ def test_memoised_source_positions_are_taichis_text():
         b = a + 1
         for i in range(3):
             if b > i:
-                b = b * 2 + undefined_name  # noqa: F821
+                b = b * 2 + a.imag
         return b
 
     src, start = inspect.getsourcelines(bad)
@@ -78,7 +79,7 @@ def test_a_kernel_error_still_points_at_its_line():
     @ti.kernel
     def broken():
         for i in x:
-            x[i] = x[i] + not_defined_anywhere  # noqa: F821
+            x[i] = x[i] + ti.not_defined_anywhere()
 
     with pytest.raises(Exception) as e:
         broken()
@@ -86,3 +87,27 @@ def test_a_kernel_error_still_points_at_its_line():
     assert "not_defined_anywhere" in text
     assert "^" in text  # the caret line under the node
     runtime.check_thread("test")  # the program is still ours and usable
+
+
+def test_column_writer_writes_what_from_numpy_writes():
+    from engine.fieldio import ColumnWriter
+
+    rng = np.random.default_rng(3)
+    a, b = ti.field(ti.f32, shape=7), ti.Vector.field(3, ti.f32, shape=7)
+    c, d = ti.field(ti.f32, shape=7), ti.field(ti.i32, shape=7)
+    va, vb, vc = rng.normal(size=7), rng.normal(size=(7, 3)), rng.normal(size=7)
+    vd = rng.integers(-5, 5, size=7)
+    ColumnWriter([a, b, c]).write(va, vb, vc)
+    ColumnWriter([d], ti.i32).write(vd)
+    ref_a, ref_b = ti.field(ti.f32, shape=7), ti.Vector.field(3, ti.f32, shape=7)
+    ref_a.from_numpy(va.astype(np.float32))
+    ref_b.from_numpy(vb.astype(np.float32))
+    assert np.array_equal(a.to_numpy(), ref_a.to_numpy())
+    assert np.array_equal(b.to_numpy(), ref_b.to_numpy())
+    assert np.array_equal(c.to_numpy(), vc.astype(np.float32))
+    assert np.array_equal(d.to_numpy(), vd.astype(np.int32))
+    w = ColumnWriter([a, b])
+    w.zero(4)  # the first 4 rows of each, the rest kept
+    assert not a.to_numpy()[:4].any() and not b.to_numpy()[:4].any()
+    assert np.array_equal(a.to_numpy()[4:], ref_a.to_numpy()[4:])
+    assert np.array_equal(b.to_numpy()[4:], ref_b.to_numpy()[4:])

@@ -14,6 +14,7 @@ from typing import List
 import numpy as np
 import taichi as ti
 
+from ..fieldio import ColumnWriter
 from . import local_space as _local
 from . import spawn as _k
 from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
@@ -67,15 +68,24 @@ class Emitters:
         self.layout, self.seed, self.inputs, self.state = layout, int(seed), inputs, state
         self.count = R = max(len(configs), int(rows))  # rows: a compile-time bound of the spawn kernel
         self._params = {}
-        for name, (a, dtype) in self._arrays(configs).items():
+        arrays = self._arrays(configs)
+        for name, (a, dtype) in arrays.items():
             vec = a.ndim == 2
             fld = ti.Vector.field(a.shape[1], dtype, shape=R) if vec else ti.field(dtype, shape=R)
             setattr(self, name, fld)
             self._params[name] = fld
+        # the parameters written in one launch a type (engine.fieldio), not a from_numpy a field
+        self._writers = []
+        for dt in (ti.f32, ti.i32):
+            names = [n for n, (_a, d) in arrays.items() if d == dt]
+            if names:
+                self._writers.append((names, ColumnWriter([self._params[n] for n in names], dt)))
         # ring heads, serial numbers and counts: state the kernels and Python share
         self.emitter_head, self.emitter_serial = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
         self.emitter_emitted, self.dropped = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
         self.emitter_moved = ti.field(ti.i32, shape=R)  # births of a launch whose ring slot was alive
+        self._counters = ColumnWriter([self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped,
+                                       self.emitter_moved], ti.i32)
         self.set_configs(configs)
         if R:
             self._zero_counters()
@@ -115,8 +125,9 @@ class Emitters:
         Writes fields only: nothing is allocated or compiled (after the first call)."""
         cs = self.configs = list(configs)
         if self.count:
-            for name, (a, _) in self._arrays(cs).items():
-                self._params[name].from_numpy(a)
+            arrays = self._arrays(cs)
+            for names, writer in self._writers:
+                writer.write(*[arrays[n][0] for n in names])
         self.index = {c.name: e for e, c in enumerate(cs) if c.name}
         kept = getattr(self, "clocks", [])[: len(cs)]
         self.clocks = kept + self._clocks()[len(kept):]
@@ -129,9 +140,7 @@ class Emitters:
                       for p, c in enumerate(cs) for s in c.sub_emitters]
 
     def _zero_counters(self) -> None:
-        zero = np.zeros(self.count, np.int32)
-        for f in (self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped, self.emitter_moved):
-            f.from_numpy(zero)
+        self._counters.zero(self.count)
 
     def _clocks(self):
         return [EmitterClock(c.start, math.inf if c.stop is None else c.stop,
