@@ -14,6 +14,8 @@ import pytest
 from runhelp import ENV, ROOT, same_bytes
 
 from engine.config.load import ConfigError, load_config
+from engine.geometry.grid import NeighbourLists
+from engine.particles.interact import GRAIN_SKIN
 
 
 def _scene(cfg):
@@ -213,21 +215,10 @@ def test_more_friction_builds_a_steeper_pile():
 
 
 # -- fluid ---------------------------------------------------------------------------------------
-def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
-    """Each member's neighbours are listed once a step and reused by every sweep and the velocity
-    pass while no member has moved past half the skin: checked before each use, in a pouring
-    fluid and in grains falling onto a floor (the lists include every slot of the grid walk's 27
-    cells closer than the kinds' largest cut-off, so each gather gets the walk's terms), and a
-    member whose neighbours overflow the list walks the grid instead (counted)."""
-    s = 0.04
-    cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0, "impacts": "projected"},
-           "emitters": [{"name": "water", "shape": "box", "position": [0.0, 0.3, 0.0], "box_size": [0.3, 0.3, 0.3],
-                         "speed": [0.0, 0.5], "bursts": [{"time": 0.0, "count": 400}], "lifetime": 100.0,
-                         "interact": {"kind": "fluid", "radius": s / 2, "iterations": 4}},
-                        {"name": "sand", "shape": "box", "position": [0.6, 0.4, 0.0], "box_size": [0.2, 0.2, 0.2],
-                         "speed": [0.0, 0.5], "bursts": [{"time": 0.0, "count": 300}], "lifetime": 100.0,
-                         "interact": {"kind": "granular", "radius": 0.015, "friction": 0.5}}],
-           "colliders": [{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "restitution": 0.0}]}
+def _lists_checked(cfg, frames=6):
+    """Run cfg, checking before each sweep and velocity pass that every member's list holds every
+    slot of the grid walk's 27 cells closer than the kinds' largest cut-off (so each gather gets
+    the walk's terms); returns the scene's interactions and the member counts checked."""
     sc = _scene(cfg)
     I = sc.particles.interact
     checked = []
@@ -248,12 +239,46 @@ def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
     for name in ("sweep", "finish"):
         inner = getattr(I, name)
         setattr(I, name, lambda h, inner=inner: (check(), inner(h))[1])
-    _run(sc, 6)
+    _run(sc, frames)
+    return I, checked
+
+
+_SAND = {"name": "sand", "shape": "box", "position": [0.6, 0.4, 0.0], "box_size": [0.2, 0.2, 0.2],
+         "speed": [0.0, 0.5], "bursts": [{"time": 0.0, "count": 300}], "lifetime": 100.0,
+         "interact": {"kind": "granular", "radius": 0.015, "friction": 0.5}}
+_FLOOR = [{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "restitution": 0.0}]
+
+
+def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
+    """Each member's neighbours are listed once a step and reused by every sweep and the velocity
+    pass while no member has moved past half the skin: checked before each use, in a pouring
+    fluid and in grains falling onto a floor, and a member whose neighbours overflow the list
+    walks the grid instead (counted)."""
+    s = 0.04
+    cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0, "impacts": "projected"},
+           "emitters": [{"name": "water", "shape": "box", "position": [0.0, 0.3, 0.0], "box_size": [0.3, 0.3, 0.3],
+                         "speed": [0.0, 0.5], "bursts": [{"time": 0.0, "count": 400}], "lifetime": 100.0,
+                         "interact": {"kind": "fluid", "radius": s / 2, "iterations": 4}}, _SAND],
+           "colliders": _FLOOR}
+    I, checked = _lists_checked(cfg)
+    assert I.lists.SKIN == NeighbourLists.SKIN  # a fluid's narrow skin
     assert len(checked) >= 6 * 4 * 5 and min(checked) > 0
     assert I.stats()["unlisted"] == 0
     I.lists.limit[None] = 3  # a member with more neighbours walks the grid
     I.relist()
     assert I.stats()["unlisted"] > 0 and (I.lists.count.to_numpy() == -1).any()
+
+
+def test_grains_wide_skin_lists_hold_every_neighbour_too():
+    """Grains alone take the wide skin (GRAIN_SKIN: fewer relistings in a pour); their lists hold
+    every neighbour of the walk before each use all the same, as they fall and pile."""
+    sand = dict(_SAND, speed=[0.0, 3.0], position=[0.6, 0.15, 0.0])  # fast, low: they meet and pile
+    cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0, "impacts": "projected"}, "emitters": [sand],
+           "colliders": _FLOOR}
+    I, checked = _lists_checked(cfg, frames=12)
+    assert I.lists.SKIN == GRAIN_SKIN > NeighbourLists.SKIN
+    assert len(checked) >= 12 * 4 * 2 and min(checked) > 0
+    assert I.stats()["unlisted"] == 0
 
 
 def test_settled_fluid_column_height():

@@ -178,8 +178,12 @@ class NeighbourLists:
 
     SKIN = 0.2
 
-    def __init__(self, grid: HashGrid, pos):
-        """``grid``: the walk; ``pos``: the slots' positions (vec3 f32 field, m)."""
+    def __init__(self, grid: HashGrid, pos, skin: float = SKIN):
+        """``grid``: the walk; ``pos``: the slots' positions (vec3 f32 field, m); ``skin``: the
+        lists' margin as a fraction of the cell (default SKIN). A larger one relists less often
+        and gathers over longer lists: what pays depends on how dense the members are and how far
+        they move a step (the owner's choice; the answer is the walk's either way)."""
+        self.SKIN = float(skin)
         n = grid.cap
         self.grid, self.pos = grid, pos
         self.nbr = ti.field(ti.i32, shape=(n, NEIGHBOURS))
