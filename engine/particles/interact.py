@@ -141,11 +141,9 @@ class Interactions(FluidTerms):
             self.grid.build(self.state.particle_pos, self.member)
             self.relist()
             for _ in range(self.iterations):
-                if self.lists.stale[None]:
-                    self.relist()
+                self.lists.refresh(self.member, self.slot_kind)  # (relists only if stale)
                 self.sweep(h)
-            if self.lists.stale[None]:
-                self.relist()
+            self.lists.refresh(self.member, self.slot_kind)
         self.finish(h)
 
     def _mesh_gravity(self) -> None:
