@@ -46,6 +46,25 @@ def time_median(fn, repeats: int, warmup: int = 1, taichi: bool = True) -> float
     return statistics.median(times)
 
 
+def time_interleaved(fns: dict, repeats: int, warmup: int = 2) -> dict:
+    """Median wall seconds of each ``fns[name]()`` (Taichi synced after each), the callables
+    taken in turn — warm-up rounds, then ``repeats`` timed rounds of one call each — so each sees
+    the machine in the same state: measured one after another, the first kernel of a section was
+    slower for its first calls (a state that is not the code's) and the ratios between them moved."""
+    for _ in range(warmup):
+        for fn in fns.values():
+            fn()
+    sync()
+    times = {name: [] for name in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            sync()
+            times[name].append(time.perf_counter() - t0)
+    return {name: statistics.median(t) for name, t in times.items()}
+
+
 def frame_seconds(scene, frames: int) -> float:
     """Mean wall seconds of ``frames`` frames of ``scene`` stepped and rendered (after one frame
     rendered outside the timing: the renderer's first call compiles)."""

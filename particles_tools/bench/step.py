@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import Row, time_median
+from .common import Row, time_interleaved
 
 H = 1.0 / 240.0
 LIFE = 2.0
@@ -108,13 +108,14 @@ def measure(n: int, repeats: int):
     P = scene.particles
     S = P.state
     npst = NumpyStep(n)
-    t_engine = time_median(lambda: scene.advance(H), repeats, warmup=2)
-    t_kernel = time_median(lambda: integrate.step_fixed(P.integrator, scene.t, H), repeats, warmup=1)
+    t = time_interleaved({
+        "engine": lambda: scene.advance(H),
+        "kernel": lambda: integrate.step_fixed(P.integrator, scene.t, H),
+        "numpy": npst.step,
+        "bandwidth": lambda: kernels.stream_rmw(S.particle_pos, S.particle_vel, S.particle_age,
+                                                S.particle_life, 1.0, 0.0)}, repeats)
     alive = P.count_alive()
-    t_np = time_median(npst.step, max(3, repeats // 3), warmup=1, taichi=False)
-    t_bw = time_median(lambda: kernels.stream_rmw(S.particle_pos, S.particle_vel, S.particle_age,
-                                                  S.particle_life, 1.0, 0.0), repeats, warmup=2)
-    return t_engine, t_kernel, t_np, t_bw, alive
+    return t["engine"], t["kernel"], t["numpy"], t["bandwidth"], alive
 
 
 def run(quick: bool = False):
