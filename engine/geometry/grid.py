@@ -201,30 +201,15 @@ class NeighbourLists:
         self.stale[None] = 0
         self.unlisted[None] = 0
         for i in range(self.grid.cap):
-            self._list(i, member, kind)
-
-    @ti.kernel
-    def refresh(self, member: ti.template(), kind: ti.template()):
-        """:meth:`build` if the lists are stale, else nothing: one launch, no read-back (reading
-        ``stale`` from Python before each sweep synchronised the host 7 times a step)."""
-        if self.stale[None] != 0:
-            self.unlisted[None] = 0
-        for i in range(self.grid.cap):
-            if self.stale[None] != 0:  # (nothing writes it in this loop: every slot sees the same)
-                self._list(i, member, kind)
-        self.stale[None] = 0
-
-    @ti.func
-    def _list(self, i, member: ti.template(), kind: ti.template()):
-        m = 0
-        if member[i] != 0:
-            xi = self.pos[i]
-            self.x_ref[i] = xi
-            self.grid.for_neighbours(i, kind, kind[i], self._list_pair, (i, xi, m))
-            if m > self.limit[None]:
-                m = -1
-                ti.atomic_add(self.unlisted[None], 1)  # (an integer count: the same in any order)
-        self.count[i] = m
+            m = 0
+            if member[i] != 0:
+                xi = self.pos[i]
+                self.x_ref[i] = xi
+                self.grid.for_neighbours(i, kind, kind[i], self._list_pair, (i, xi, m))
+                if m > self.limit[None]:
+                    m = -1
+                    ti.atomic_add(self.unlisted[None], 1)  # (an integer count: the same in any order)
+            self.count[i] = m
 
     @ti.func
     def _list_pair(self, j, i, xi, m: ti.template()):

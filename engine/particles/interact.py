@@ -141,9 +141,11 @@ class Interactions(FluidTerms):
             self.grid.build(self.state.particle_pos, self.member)
             self.relist()
             for _ in range(self.iterations):
-                self.lists.refresh(self.member, self.slot_kind)  # (relists only if stale)
+                if self.lists.stale[None]:
+                    self.relist()
                 self.sweep(h)
-            self.lists.refresh(self.member, self.slot_kind)
+            if self.lists.stale[None]:
+                self.relist()
         self.finish(h)
 
     def _mesh_gravity(self) -> None:
