@@ -261,7 +261,7 @@ def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
                          "interact": {"kind": "fluid", "radius": s / 2, "iterations": 4}}, _SAND],
            "colliders": _FLOOR}
     I, checked = _lists_checked(cfg)
-    assert I.lists.SKIN == NeighbourLists.SKIN  # a fluid's narrow skin
+    assert I.lists.skin == NeighbourLists.SKIN  # a fluid's narrow skin
     assert len(checked) >= 6 * 4 * 5 and min(checked) > 0
     assert I.stats()["unlisted"] == 0
     I.lists.limit[None] = 3  # a member with more neighbours walks the grid
@@ -276,7 +276,7 @@ def test_grains_wide_skin_lists_hold_every_neighbour_too():
     cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0, "impacts": "projected"}, "emitters": [sand],
            "colliders": _FLOOR}
     I, checked = _lists_checked(cfg, frames=12)
-    assert I.lists.SKIN == GRAIN_SKIN > NeighbourLists.SKIN
+    assert I.lists.skin == GRAIN_SKIN > NeighbourLists.SKIN
     assert len(checked) >= 12 * 4 * 2 and min(checked) > 0
     assert I.stats()["unlisted"] == 0
 

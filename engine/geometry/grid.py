@@ -165,25 +165,25 @@ class NeighbourLists:
 
     ``build(member, kind)`` lists, for every slot with ``member[i] != 0``, the slots j of the walk
     (the 27 cells around its cell at the grid's last build, ``kind[j] == kind[i]``, j ≠ i) within
-    ``cell·(1 + SKIN)`` of it, in the walk's order, at most NEIGHBOURS of them; a slot with more is
+    ``cell·(1 + skin)`` of it, in the walk's order, at most NEIGHBOURS of them; a slot with more is
     marked to walk the grid instead (counted in ``unlisted``: nothing is cut). ``visit`` gathers over
     a slot's list (or walk) with the walk's visitor contract, so a gather whose visitor applies a
     cut-off ≤ ``cell`` sums the same terms in the same order as the walk would, as long as no member
-    has moved SKIN·cell/2 since the listing: ``moved(i, x)`` (call it where a member is moved)
+    has moved skin·cell/2 since the listing: ``moved(i, x)`` (call it where a member is moved)
     raises ``stale``, and the owner lists again before the next gather.
 
     Fields: ``nbr`` (i32, capacity × NEIGHBOURS), ``count`` (i32: listed; −1: walks the grid),
     ``x_ref`` (where each member was listed), ``stale``, ``unlisted``, ``limit`` (i32 scalars;
     ``limit`` is NEIGHBOURS, lower in tests to force the walk)."""
 
-    SKIN = 0.2
+    SKIN = 0.2  # the default skin, a fraction of a cell
 
     def __init__(self, grid: HashGrid, pos, skin: float = SKIN):
         """``grid``: the walk; ``pos``: the slots' positions (vec3 f32 field, m); ``skin``: the
         lists' margin as a fraction of the cell (default SKIN). A larger one relists less often
         and gathers over longer lists: what pays depends on how dense the members are and how far
         they move a step (the owner's choice; the answer is the walk's either way)."""
-        self.SKIN = float(skin)
+        self.skin = float(skin)
         n = grid.cap
         self.grid, self.pos = grid, pos
         self.nbr = ti.field(ti.i32, shape=(n, NEIGHBOURS))
@@ -193,8 +193,8 @@ class NeighbourLists:
         self.unlisted = ti.field(ti.i32, shape=())
         self.limit = ti.field(ti.i32, shape=())
         self.limit[None] = NEIGHBOURS
-        self.reach2 = (grid.cell * (1.0 + self.SKIN)) ** 2
-        self.move2 = (0.5 * self.SKIN * grid.cell) ** 2
+        self.reach2 = (grid.cell * (1.0 + self.skin)) ** 2
+        self.move2 = (0.5 * self.skin * grid.cell) ** 2
 
     @ti.kernel
     def build(self, member: ti.template(), kind: ti.template()):
@@ -231,6 +231,6 @@ class NeighbourLists:
 
     @ti.func
     def moved(self, i, x):
-        """Member i is now at x: the lists are stale once it is SKIN·cell/2 from where it was listed."""
+        """Member i is now at x: the lists are stale once it is skin·cell/2 from where it was listed."""
         if (x - self.x_ref[i]).norm_sqr() > self.move2:
             self.stale[None] = 1  # (every writer writes 1: the same in any order)
