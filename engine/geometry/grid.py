@@ -172,8 +172,10 @@ class NeighbourLists:
     has moved skin·cell/2 since the listing: ``moved(i, x)`` (call it where a member is moved)
     raises ``stale``, and the owner lists again before the next gather.
 
-    Fields: ``nbr`` (i32, capacity × NEIGHBOURS), ``count`` (i32: listed; −1: walks the grid),
-    ``x_ref`` (where each member was listed), ``stale``, ``unlisted``, ``limit`` (i32 scalars;
+    Fields: ``nbr`` (i32, capacity × (NEIGHBOURS + 1): slot i's list is ``nbr[i, :count[i]]``,
+    what lies past it is scratch), ``count`` (i32: listed; −1: walks the grid), ``x_ref`` (where
+    each member was listed), ``sorted_x``/``sorted_kind``/``sorted_cell`` (the listing's copies of
+    the grid's members in its sorted order), ``stale``, ``unlisted``, ``limit`` (i32 scalars;
     ``limit`` is NEIGHBOURS, lower in tests to force the walk)."""
 
     SKIN = 0.2  # the default skin, a fraction of a cell
@@ -186,38 +188,59 @@ class NeighbourLists:
         self.skin = float(skin)
         n = grid.cap
         self.grid, self.pos = grid, pos
-        self.nbr = ti.field(ti.i32, shape=(n, NEIGHBOURS))
+        self.nbr = ti.field(ti.i32, shape=(n, NEIGHBOURS + 1))  # (the last column: scratch)
         self.count = ti.field(ti.i32, shape=n)
         self.x_ref = ti.Vector.field(3, ti.f32, shape=n)
         self.stale = ti.field(ti.i32, shape=())
         self.unlisted = ti.field(ti.i32, shape=())
         self.limit = ti.field(ti.i32, shape=())
         self.limit[None] = NEIGHBOURS
+        # the grid's members in its sorted order (bucket, then slot): their positions at the
+        # listing, kinds and cells, so the listing's walk reads each bucket's candidates from
+        # consecutive memory rather than gathering them slot by slot (the same candidates, in
+        # the same order, with the same values: the same lists)
+        self.sorted_x = ti.Vector.field(3, ti.f32, shape=n)
+        self.sorted_kind = ti.field(ti.i32, shape=n)
+        self.sorted_cell = ti.Vector.field(3, ti.i32, shape=n)
         self.reach2 = (grid.cell * (1.0 + self.skin)) ** 2
         self.move2 = (0.5 * self.skin * grid.cell) ** 2
 
     @ti.kernel
     def build(self, member: ti.template(), kind: ti.template()):
+        G = self.grid
         self.stale[None] = 0
         self.unlisted[None] = 0
-        for i in range(self.grid.cap):
+        for k in range(G.members[None]):
+            j = G.sorted[k]
+            self.sorted_x[k] = self.pos[j]
+            self.sorted_kind[k] = kind[j]
+            self.sorted_cell[k] = G.slot_cell[j]
+        for i in range(G.cap):
             m = 0
             if member[i] != 0:
                 xi = self.pos[i]
                 self.x_ref[i] = xi
-                self.grid.for_neighbours(i, kind, kind[i], self._list_pair, (i, xi, m))
+                want, c = kind[i], G.slot_cell[i]
+                # the grid's walk (HashGrid.for_neighbours: the 27 cells in its order, each
+                # bucket's slots of that cell and kind, by slot) over the sorted copies
+                # without a branch per candidate: each is written at place m (the spare column
+                # past the list's end once it is full) and kept by counting it — about a quarter
+                # of the candidates are kept, so a branch on it mispredicts often (water's
+                # listing: 3.1 → 1.7 ms)
+                for n in range(27):
+                    cc = G.neighbour_cell(c, n)
+                    b = G.bucket(cc)
+                    for k in range(G.start[b], G.start[b + 1]):
+                        r = xi - self.sorted_x[k]
+                        j = G.sorted[k]
+                        keep = (self.sorted_kind[k] == want) & (self.sorted_cell[k] == cc).all() \
+                            & (r.dot(r) < self.reach2) & (j != i)
+                        self.nbr[i, ti.min(m, NEIGHBOURS)] = j
+                        m += ti.cast(keep, ti.i32)
                 if m > self.limit[None]:
                     m = -1
                     ti.atomic_add(self.unlisted[None], 1)  # (an integer count: the same in any order)
             self.count[i] = m
-
-    @ti.func
-    def _list_pair(self, j, i, xi, m: ti.template()):
-        r = xi - self.pos[j]
-        if r.dot(r) < self.reach2:
-            if m < NEIGHBOURS:
-                self.nbr[i, m] = j
-            m += 1
 
     @ti.func
     def visit(self, i, kind: ti.template(), want, visit: ti.template(), args: ti.template()):

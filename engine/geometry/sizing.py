@@ -28,6 +28,7 @@ def grid_bytes(capacity: int) -> int:
 def interact_bytes(capacity: int, fluid: bool) -> int:
     """The grid plus the interaction's own per-slot fields: position and velocity before the
     solve, the correction and its Jacobi delta (4 × vec3 f32, member flag), the neighbour list
-    (NEIGHBOURS + 1 int32 and where the slot was listed, vec3 f32); fluid adds λ, the vorticity and
-    a velocity buffer (7 f32)."""
-    return grid_bytes(capacity) + capacity * (4 * 12 + 4 + 4 * (NEIGHBOURS + 1) + 12 + (28 if fluid else 0))
+    (NEIGHBOURS + 1 int32 and its count, where the slot was listed, vec3 f32, and the listing's
+    sorted copies of position, kind and cell, 7 × 4 bytes); fluid adds λ, the vorticity and a
+    velocity buffer (7 f32)."""
+    return grid_bytes(capacity) + capacity * (4 * 12 + 4 + 4 * (NEIGHBOURS + 2) + 12 + 28 + (28 if fluid else 0))
