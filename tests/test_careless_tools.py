@@ -1,7 +1,7 @@
 """Issue 20: careless users of the tools — `particles run`'s output folder and --frames, the
 wedge farm's teardown, the progress display, `particles list` outside the checkout, the wheel's
 configs. Each case works, or fails in one line naming the flag and the value, and changes nothing.
-(The engine's API and config cases are tests/test_careless.py.)"""
+(The engine's API and config cases are tests/test_careless_frames.py, _input.py and _threads.py.)"""
 import os
 
 import numpy as np
