@@ -318,18 +318,27 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
             accA[k] = layer(A, B, shading)
 
     @ti.kernel
-    def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32):
+    def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32,
+                touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32):
         """The reduced layer's rows interpolated along x at every full-resolution column:
         rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
-        vertical half with two loads per pixel instead of four)."""
+        vertical half with two loads per pixel instead of four) — only the rows the composite
+        can read: it reads row j for a tile whose footprint (rows ``lo_near`` spans, fewer than
+        R = TILE·s + 3) holds a reduced tile drawn this frame, so row j is needed only when a
+        drawn reduced tile lies within R rows of it (the rest are left as they were, unread)."""
         LO = W * H
         for j in range(Hl):
-            for x in range(W):
-                u = (x + 0.5) * s - 0.5
-                i0 = ti.cast(ti.floor(u), ti.i32)
-                fx = u - i0
-                xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
-                rows[j * W + x] = (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
+            need = 0
+            for tr in range(ti.max(0, j - R) // TILE, ti.min(TYl - 1, (j + R) // TILE) + 1):
+                for tx in range(TXl):
+                    need |= touched_lo[tr * TXl + tx]
+            if need != 0:
+                for x in range(W):
+                    u = (x + 0.5) * s - 0.5
+                    i0 = ti.cast(ti.floor(u), ti.i32)
+                    fx = u - i0
+                    xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+                    rows[j * W + x] = (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
 
     @ti.kernel
     def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, bgc: ND_V4, dep: ND_F,

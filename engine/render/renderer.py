@@ -26,7 +26,7 @@ from .background import build_background_kernel, copy_background, downsample_dep
 from .binning import build_binning_kernels, chunks_for
 from .composite import build_composite_kernels
 from .resolution import particle_scale
-from .sprites import Look, SpriteRecords, build_sprite_kernel
+from .sprites import TILE, Look, SpriteRecords, build_sprite_kernel
 from .targets import FrameTargets, packed_view
 
 SCHEDULES = ("tiles", "pixels")
@@ -186,7 +186,8 @@ class Renderer:
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:
-            self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale)
+            self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
+                               int(TILE * t.scale) + 3)
         if self.schedule == "tiles":
             self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, bgc, dep, t.bg_packed,
                                        packed, t.dirty, t.touched_lo, *common)
