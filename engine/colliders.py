@@ -42,6 +42,7 @@ body's box inlined at every site of the located step (about eleven per shape, ea
 cost minutes of compilation for a stack of ten crates; the loop costs one copy whatever the
 count, and a bounding-sphere test per shape. The price: their impacts are not located in time
 inside a step (a point moving more than a shape's thickness in one step could pass through).
+(Their distance and the run-time loop: :mod:`engine.collider_projected`.)
 """
 # (no __future__ annotations: Taichi reads the funcs' ti.template() annotations)
 
@@ -52,6 +53,7 @@ import numpy as np
 import taichi as ti
 
 from .collider_poses import IDENTITY, ShapePoses
+from .collider_projected import ProjectedShapes
 from .geometry.shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, box_local, quat_normalize, rotate,
                               spun, turn, turned)
 from .ode.events import contact_band
@@ -113,7 +115,7 @@ class ColliderSpec:
 
 
 @ti.data_oriented
-class Colliders(ShapePoses):
+class Colliders(ShapePoses, ProjectedShapes):
     """Fields for a fixed list of shapes and the ``ti.func`` s that find and resolve contacts.
 
     Fields (shape (count,), ``dtype``: f32 for scenes, f64 for reference runs): ``collider_point``
@@ -323,42 +325,6 @@ class Colliders(ShapePoses):
         return x, v, speed, N
 
     @ti.func
-    def projected_contact(self, j, x, lag):
-        """(g, N) of projected shape j (a run-time index: a rigid body's box or capsule) for a
-        point at x, ``lag`` s before the step's end: x is turned forward by ω·lag into the
-        shape's frame at the step's end (as :meth:`contact` does for a spinning box), the normal
-        turned back."""
-        p = self.collider_point[j] - self.collider_vel[j] * lag
-        ax, c, sn = turn(self.collider_omega[j], lag)
-        r = turned(x - p, ax, c, sn)
-        ey = self.collider_normal[j]
-        g, nw = ti.cast(0.0, self.dtype), ey
-        kinds = ti.static(self.kinds[self.event_count:])
-        if ti.static(BOX in kinds and CAPSULE in kinds):  # (only the kinds present are compiled)
-            if self.collider_kind[j] == BOX:
-                g, nw = box_local(r, self.collider_axis_x[j], ey, self.collider_axis_z[j], self.collider_half[j])
-            else:
-                g, nw = capsule_local(r, ey, self.collider_half[j][1], self.collider_radius[j])
-        elif ti.static(BOX in kinds):
-            g, nw = box_local(r, self.collider_axis_x[j], ey, self.collider_axis_z[j], self.collider_half[j])
-        else:
-            g, nw = capsule_local(r, ey, self.collider_half[j][1], self.collider_radius[j])
-        return g - ti.static(self.offset), turned(nw, ax, c, -sn)
-
-    @ti.func
-    def near_projected(self, x):
-        """1 if x is within a projected shape's bounding sphere (grown by ``offset``), else 0: a
-        step ending there is looked at by :meth:`project` (a bound test only: the exact one would
-        inline each shape's contact once more)."""
-        near = 0
-        if ti.static(self.event_count < self.count):
-            for j in range(self.event_count, self.count):
-                reach = self.collider_bound[j] + ti.static(self.offset)
-                if (x - self.collider_point[j]).norm_sqr() < reach * reach:
-                    near = 1
-        return near
-
-    @ti.func
     def project(self, x, v, x0, v0, h):
         """Every shape in turn: a point that ended the step of h (from x0, v0) inside is put
         back on the surface and responds; if it started the step touching that shape (within
@@ -402,37 +368,9 @@ class Colliders(ShapePoses):
                 x, v, speed, n_hit = self._reflect(k, x, v, 0.0, dv, g, N)
                 self.push_event(k, i, x, v - v_in, 0.0)
                 which = k
-        if ti.static(self.event_count < self.count):  # the projected shapes, in a run-time loop
-            for j in range(self.event_count, self.count):
-                p = self.collider_point[j]
-                reach = self.collider_bound[j] + ti.static(self.offset)
-                if (x - p).norm_sqr() < reach * reach:
-                    g, N = self.projected_contact(j, x, 0.0)
-                    if g < 0.0:
-                        hits += 1
-                        g0, _N0 = self.projected_contact(j, x0, h)
-                        dv = v - v0 if g0 <= self._band(x0) else zero
-                        x = x - g * N
-                        vc = self.collider_vel[j] + self.collider_omega[j].cross(x - p)
-                        v_in = v
-                        x, v, speed, n_hit = self._bounce(x, v, vc, self.collider_restitution[j],
-                                                          self.collider_friction[j], dv, N)
-                        if ti.static(self.pushes_on(None)):  # (every projected shape is a body's)
-                            self.pusher.add(i, self.pusher.body_of[j], x - p, v - v_in)
-                        which = j
+        if ti.static(self.event_count < self.count):
+            x, v, hits, which, n_hit, speed = self.project_projected(x, v, x0, v0, h, i, hits, which, n_hit, speed)
         return x, v, hits, killed, which, n_hit, speed
-
-
-@ti.func
-def capsule_local(r, a, half, radius):
-    """(g, N) of the offset r from a capsule's centre, its unit axis a, the segment's half length
-    and the radius (m): the distance from the segment less the radius, the outward normal."""
-    dd = r - ti.min(ti.max(r.dot(a), -half), half) * a
-    dist = dd.norm()
-    N = a
-    if dist > 1e-12:
-        N = dd / dist
-    return dist - radius, N
 
 
 _SHARED = ("specs", "count", "event_count", "dtype", "kinds", "spins", "rotating", "names", "owners", "parties", "collider_point",
