@@ -31,36 +31,29 @@ def sync():
 
 
 def time_median(fn, repeats: int, warmup: int = 1, taichi: bool = True) -> float:
-    """Median wall seconds of ``fn()`` over ``repeats`` runs after ``warmup`` runs (Taichi synced)."""
-    for _ in range(warmup):
-        fn()
-    if taichi:
-        sync()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        if taichi:
-            sync()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    """Median wall seconds of ``fn()`` over ``repeats`` runs after ``warmup`` runs (Taichi synced
+    after each unless ``taichi`` is False): :func:`time_interleaved` of one callable."""
+    return time_interleaved({"fn": fn}, repeats, warmup, taichi)["fn"]
 
 
-def time_interleaved(fns: dict, repeats: int, warmup: int = 2) -> dict:
-    """Median wall seconds of each ``fns[name]()`` (Taichi synced after each), the callables
-    taken in turn — warm-up rounds, then ``repeats`` timed rounds of one call each — so each sees
-    the machine in the same state: measured one after another, the first kernel of a section was
-    slower for its first calls (a state that is not the code's) and the ratios between them moved."""
+def time_interleaved(fns: dict, repeats: int, warmup: int = 2, taichi: bool = True) -> dict:
+    """Median wall seconds of each ``fns[name]()`` (Taichi synced after each unless ``taichi`` is
+    False), the callables taken in turn — warm-up rounds, then ``repeats`` timed rounds of one
+    call each — so each sees the machine in the same state: measured one after another, the first
+    kernel of a section was slower for its first calls (a state that is not the code's) and the
+    ratios between them moved."""
     for _ in range(warmup):
         for fn in fns.values():
             fn()
-    sync()
+    if taichi:
+        sync()
     times = {name: [] for name in fns}
     for _ in range(repeats):
         for name, fn in fns.items():
             t0 = time.perf_counter()
             fn()
-            sync()
+            if taichi:
+                sync()
             times[name].append(time.perf_counter() - t0)
     return {name: statistics.median(t) for name, t in times.items()}
 
