@@ -195,3 +195,31 @@ def test_render_into_a_given_array_and_refuse_a_wrong_one():
                 np.zeros((96, 54, 4), np.uint8), np.zeros((54, 192, 4), np.uint8)[:, ::2]):
         with pytest.raises(ValueError, match="out"):
             s.render(out=bad)
+
+
+@pytest.mark.parametrize("schedule", ["tiles", "pixels"])
+def test_once_every_particle_is_gone_the_frame_is_the_background_again(schedule):
+    """A frame with nothing to draw skips the splat only once no reduced tile is left drawn from
+    the last one: the first empty frame after smoke in the reduced layer resets it, and it and
+    every later one equal the background alone (the frame before anything was born)."""
+    s = ParticleScene.from_dict({
+        "name": "puff", "fps": 60, "frames": 60,
+        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
+        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
+        "emitters": [{"name": "puff", "position": [0.0, 1.0, 0.0], "speed": [0.0, 0.2],
+                      "bursts": [{"time": 0.0, "count": 40}], "lifetime": 0.2, "blend": "alpha",
+                      "size": [[0.0, 0.6]], "alpha": [[0.0, 0.8]]}]})
+    if schedule == "pixels":
+        s.scene.renderer = _other_schedule(s.scene, "pixels")
+    background = s.render().copy()
+    s.step(1 / 60)
+    drawn = s.render().copy()
+    t = s.scene.renderer.targets(320, 180)
+    assert t.has_lo and not t.lo_clear and np.abs(drawn.astype(int) - background).sum() > 1000
+    for _ in range(30):  # past every particle's lifetime
+        s.step(1 / 60)
+    assert s.particles()["position"].shape[0] == 0
+    for _ in range(3):  # the first empty frame splats (resetting the reduced tiles), the others skip
+        assert np.array_equal(s.render(), background)
+    assert t.lo_clear
+    s.close()

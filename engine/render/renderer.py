@@ -208,6 +208,11 @@ class Renderer:
         if total > t.pair_capacity:  # an ndarray: growing it recompiles nothing
             t.grow_pairs(int(total * 1.25) + 1024)
         self.last_pairs = total
+        if total == 0 and t.lo_clear:
+            # nothing to draw, and no reduced tile was drawn at these targets' last splat (each
+            # ``touched_lo`` is 0): every tile count is 0, so no accumulator is read — no
+            # scatter, splat or reduced rows (an empty frame's fixed cost)
+            return 0
         self._scatter(t.pairs, t.hist, t.tile_start, t.T0, t.TX, t.TXl)
         if self.schedule == "tiles":
             self._k["splat_tiles"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep,
@@ -215,4 +220,5 @@ class Renderer:
         elif t.has_lo:
             self._k["splat_pixels_lo"](t.pairs, t.tile_count, t.tile_start, t.accA, dep, t.touched_lo,
                                        t.T0, W, H, t.T1, t.TXl, t.Wl, t.Hl, self.shading)
+        t.lo_clear = total == 0  # (both splats set each touched_lo to whether its tile holds sprites)
         return int(t.has_lo)

@@ -59,6 +59,7 @@ class FrameTargets:
         self.lo_rows = ti.ndarray(vec4, shape=self.Hl * W if self.has_lo else 1)
         self.touched_lo = ti.ndarray(ti.i32, shape=max(1, self.T1))
         self.touched_lo.fill(0)
+        self.lo_clear = True  # every touched_lo is 0 (the renderer's empty frames skip the splat)
         self.hist = ti.ndarray(ti.i32, shape=(chunks, self.T))
         self.tile_count = ti.ndarray(ti.i32, shape=self.T)
         self.tile_count.fill(0)  # (a scene without particles never bins: every tile stays empty)
