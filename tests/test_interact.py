@@ -15,6 +15,7 @@ from runhelp import ENV, ROOT, same_bytes
 
 from engine.config.load import ConfigError, load_config
 from engine.geometry.grid import NeighbourLists
+from engine.geometry.sizing import table_size
 from engine.particles.interact import GRAIN_SKIN
 
 
@@ -198,6 +199,28 @@ def test_grains_do_not_overlap():
     r = 0.02
     d, _ = cKDTree(x).query(x, 2)
     assert d[:, 1].min() >= 2 * r - 0.1 * r, d[:, 1].min() / (2 * r)
+
+
+def test_grains_between_other_emitters_interact_over_their_own_ring_only():
+    """The interactions' per-slot loops run over the interacting emitters' rings (a game's pool
+    has spare slots past them): grains poured after a plain emitter and before another still
+    settle without overlapping, and the loops and the grid's table follow the grains' ring."""
+    data = _pour(0.8, rate=300.0, stop=0.8, frames=45)
+    grains = data["emitters"][0]
+    plain = {"name": "dust", "position": [1.5, 0.5, 0.0], "rate": 4000.0, "lifetime": 0.5, "speed": [0.5, 1.0]}
+    data["emitters"] = [plain, grains, dict(plain, name="more_dust")]
+    sc = _scene(data)
+    I, layout = sc.particles.interact, sc.particles.layout
+    assert (I.lo, I.hi) == (layout.starts[1], layout.starts[1] + layout.sizes[1]) and I.lo > 0 and I.hi < I.cap
+    assert I.grid.table == table_size(I.hi - I.lo) < table_size(I.cap)  # sized for the ring, not the pool
+    from scipy.spatial import cKDTree
+
+    _run(sc, 45)
+    alive = sc.particles.state.particle_alive.to_numpy()[I.lo:I.hi] != 0
+    x = sc.particles.state.particle_pos.to_numpy()[I.lo:I.hi][alive]
+    assert len(x) >= 200
+    d, _ = cKDTree(x).query(x, 2)
+    assert d[:, 1].min() >= 2 * 0.02 - 0.1 * 0.02, d[:, 1].min() / 0.04
 
 
 @pytest.mark.slow

@@ -42,12 +42,17 @@ class HashGrid:
 
     built = 0  # grids constructed in this process: a scene without interactions builds none
 
-    def __init__(self, capacity: int, cell: float):
+    def __init__(self, capacity: int, cell: float, lo: int = 0, hi: int = None):
+        """``capacity`` slots (the per-slot arrays' length), of which only slots ``lo`` …
+        ``hi`` − 1 (default: all) can be members: the build's loops and the table's size follow
+        that range."""
         HashGrid.built += 1
         self.cap = max(1, int(capacity))
+        self.lo = max(0, int(lo))
+        self.hi = self.cap if hi is None else min(self.cap, int(hi))
         self.cell = float(cell)
         self.inv_cell = 1.0 / self.cell
-        self.table = table_size(self.cap)
+        self.table = table_size(max(1, self.hi - self.lo))
         self.blocks = self.table // BLOCK
         self.mask = self.table - 1
         self.count = ti.field(ti.i32, shape=self.table)
@@ -103,7 +108,7 @@ class HashGrid:
             self.fill[b] = 0
         self.ungridded[None] = 0
         self.max_bucket[None] = 0
-        for i in range(self.cap):
+        for i in range(self.lo, self.hi):
             b = -1
             if member[i] != 0:
                 q = pos[i] * self.inv_cell
@@ -135,7 +140,7 @@ class HashGrid:
                 b = k * BLOCK + m
                 self.start[b] = run
                 run += self.count[b]
-        for i in range(self.cap):
+        for i in range(self.lo, self.hi):
             b = self.slot_bucket[i]
             if b >= 0:
                 self.sorted[self.start[b] + ti.atomic_add(self.fill[b], 1)] = i
@@ -215,7 +220,7 @@ class NeighbourLists:
             self.sorted_x[k] = self.pos[j]
             self.sorted_kind[k] = kind[j]
             self.sorted_cell[k] = G.slot_cell[j]
-        for i in range(G.cap):
+        for i in range(G.lo, G.hi):
             m = 0
             if member[i] != 0:
                 xi = self.pos[i]

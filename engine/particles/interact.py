@@ -73,6 +73,15 @@ class Interactions(FluidTerms):
                 self.params.setdefault(c.interact.kind, c.interact)
         self.emitter_kind = ti.field(ti.i32, shape=len(kinds))
         self.emitter_kind.from_numpy(kinds)
+        # the slots the interacting emitters' rings span (rings are consecutive ranges in emitter
+        # order; emitters added later never interact: engine.particles.system): every per-slot
+        # loop runs over [lo, hi) only — a game's pool keeps spare slots (water: 2,508 of 18,892)
+        self.lo, self.hi = 0, self.cap
+        if sizes:
+            starts = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+            on = [e for e in range(len(sizes)) if kinds[e] != 0]
+            if on:
+                self.lo, self.hi = int(starts[min(on)]), int(starts[max(on) + 1])
         self.granular, self.fluid = "granular" in self.params, "fluid" in self.params
         self.gravity, self.repel = "gravity" in self.params, "repel" in self.params
         n = self.cap
@@ -120,7 +129,7 @@ class Interactions(FluidTerms):
             else:  # the pair sum reads the gravity slots' positions packed in slot order
                 self.g_pos = ti.Vector.field(3, ti.f32, shape=n)
                 self.g_count = ti.field(ti.i32, shape=())
-        self.grid = HashGrid(n, cell) if cell > 0 else None
+        self.grid = HashGrid(n, cell, self.lo, self.hi) if cell > 0 else None
         # each member's neighbours listed once a step and reused by every gather while they hold
         # (engine.geometry.grid.NeighbourLists: every visitor here cuts off within the cell)
         # The skin: grains and repelled points (about a dozen neighbours within 1.2 cells) take a
@@ -173,7 +182,7 @@ class Interactions(FluidTerms):
     @ti.kernel
     def prepare(self):
         S = self.state
-        for i in range(self.cap):
+        for i in range(self.lo, self.hi):
             k = 0
             if S.particle_alive[i] != 0 and S.particle_age[i] > 0.0:
                 k = self.emitter_kind[S.particle_emitter[i]]
@@ -234,10 +243,10 @@ class Interactions(FluidTerms):
         """One Jacobi sweep: every member's Δx from its neighbours' positions, then applied."""
         S = self.state
         if ti.static(self.fluid):
-            for i in range(self.cap):
+            for i in range(self.lo, self.hi):
                 if self.slot_kind[i] == 2:
                     self.lam[i] = self._fluid_lambda(i)
-        for i in range(self.cap):
+        for i in range(self.lo, self.hi):
             k = self.slot_kind[i]
             dx = ti.Vector([0.0, 0.0, 0.0])
             if ti.static(self.granular):
@@ -250,7 +259,7 @@ class Interactions(FluidTerms):
                 if k == 4:
                     dx = self._repel(i)
             self.delta[i] = dx
-        for i in range(self.cap):
+        for i in range(self.lo, self.hi):
             if self.member[i] != 0:
                 x = S.particle_pos[i] + self.delta[i]
                 if ti.static(self.has_colliders):
@@ -283,7 +292,7 @@ class Interactions(FluidTerms):
         """The gravity slots' positions into ``g_pos[0:g_count]`` in slot order (one serial pass)."""
         self.g_count[None] = 0
         ti.loop_config(serialize=True)
-        for j in range(self.cap):
+        for j in range(self.lo, self.hi):
             if self.slot_kind[j] == 3:
                 self.g_pos[self.g_count[None]] = self.state.particle_pos[j]
                 self.g_count[None] += 1
@@ -293,7 +302,7 @@ class Interactions(FluidTerms):
         """Velocities from the corrections, the fluid's velocity terms, gravity's kick, then every
         member projected onto the colliders (x_pre, v_pre: the step's end before the solve)."""
         S = self.state
-        for i in range(self.cap):
+        for i in range(self.lo, self.hi):
             if self.member[i] != 0:
                 v = S.particle_vel[i] + self.corr[i] / h
                 if ti.static(self.granular):
@@ -304,23 +313,23 @@ class Interactions(FluidTerms):
                             v *= top / s
                 S.particle_vel[i] = v
         if ti.static(self.f_vort > 0):
-            for i in range(self.cap):
+            for i in range(self.lo, self.hi):
                 if self.slot_kind[i] == 2:
                     self.omega[i] = self._vorticity(i)
         if ti.static(self.fluid):
-            for i in range(self.cap):
+            for i in range(self.lo, self.hi):
                 if self.slot_kind[i] == 2:
                     self.vbuf[i] = self._fluid_velocity(i, h)
         if ti.static(self.gravity and not self.mesh):
             self._pack_gravity()
-            for i in range(self.cap):
+            for i in range(self.lo, self.hi):
                 if self.slot_kind[i] == 3:
                     self.delta[i] = S.particle_vel[i] + h * self._gravity(i)
         if ti.static(self.mesh):
-            for i in range(self.cap):
+            for i in range(self.lo, self.hi):
                 if self.slot_kind[i] == 3:
                     self.delta[i] = S.particle_vel[i] + h * self.g_acc[i]
-        for i in range(self.cap):
+        for i in range(self.lo, self.hi):
             k = self.slot_kind[i]
             if k != 0:
                 v = S.particle_vel[i]
