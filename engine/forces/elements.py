@@ -23,7 +23,7 @@ User energies (Taichi autodiff over per-element copies) are :mod:`engine.forces.
 import numpy as np
 import taichi as ti
 
-from ..geometry.colouring import greedy_colors, schedule
+from ..geometry.colouring import SERIAL_MAX, greedy_colors, schedule
 from . import terms
 
 KINDS = {"bending": 4, "area": 3, "volume": 4, "elastic": 4}
@@ -172,12 +172,18 @@ def _project_one(g: ti.template(), X: ti.template(), w: ti.template(), hh, q):
 
 @ti.kernel
 def _project(g: ti.template(), X: ti.template(), x_prev: ti.template(), w: ti.template(), h: ti.f64):
-    """All colours in order, each a top-level loop (engine.xpbd.solver): one launch a sweep."""
+    """All colours in order (engine.xpbd.solver): one serial loop for a group of at most
+    SERIAL_MAX, else a top-level loop a colour; one launch a sweep."""
     hh = ti.cast(h, g.dtype)
-    for c in ti.static(range(len(g.color_ranges))):
-        lo, hi = ti.static(g.color_ranges[c])
-        for q in range(lo, hi):
+    if ti.static(g.count <= SERIAL_MAX):  # every colour in order on this thread
+        ti.loop_config(serialize=True)
+        for q in range(g.count):
             _project_one(g, X, w, hh, q)
+    else:
+        for c in ti.static(range(len(g.color_ranges))):
+            lo, hi = ti.static(g.color_ranges[c])
+            for q in range(lo, hi):
+                _project_one(g, X, w, hh, q)
 
 
 @ti.kernel
