@@ -95,9 +95,21 @@ ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE st
            "_build.<locals>.whole": "rigid XPBD: a small scene's whole step on one thread",
            "run_steps": "engine.springs.fused: a small spring network's frame on the CPU backend only "
                         "(SpringSystem._fusable checks the arch; a GPU keeps the parallel per-phase "
-                        "launches): one thread beats 4-16 launches a substep there"}
+                        "launches): one thread beats 4-16 launches a substep there",
+           "_project": "engine.xpbd.constraints and engine.forces.elements: a small XPBD group's sweep "
+                       "on the CPU backend only (engine.geometry.colouring.serial_sweep checks the arch; "
+                       "a GPU keeps a parallel loop a colour): one thread beats a pool wake-up a colour"}
 # of those, the ones a frame may launch on the CPU (the slow check below records on the CPU)
-CPU_FRAME = {"run_steps"}
+CPU_FRAME = {"run_steps", "_project"}
+
+
+def test_small_xpbd_groups_are_serial_on_the_cpu_only(monkeypatch):
+    from engine import runtime
+    from engine.geometry.colouring import SERIAL_MAX, serial_sweep
+
+    assert serial_sweep(100) and serial_sweep(SERIAL_MAX) and not serial_sweep(SERIAL_MAX + 1)
+    monkeypatch.setattr(runtime, "_arch_in_use", lambda: "cuda")
+    assert not serial_sweep(100)
 
 
 def kernels_in_source(root):

@@ -23,7 +23,7 @@ User energies (Taichi autodiff over per-element copies) are :mod:`engine.forces.
 import numpy as np
 import taichi as ti
 
-from ..geometry.colouring import SERIAL_MAX, greedy_colors, schedule
+from ..geometry.colouring import greedy_colors, schedule, serial_sweep
 from . import terms
 
 KINDS = {"bending": 4, "area": 3, "volume": 4, "elastic": 4}
@@ -172,10 +172,10 @@ def _project_one(g: ti.template(), X: ti.template(), w: ti.template(), hh, q):
 
 @ti.kernel
 def _project(g: ti.template(), X: ti.template(), x_prev: ti.template(), w: ti.template(), h: ti.f64):
-    """All colours in order (engine.xpbd.solver): one serial loop for a group of at most
-    SERIAL_MAX, else a top-level loop a colour; one launch a sweep."""
+    """All colours in order (engine.xpbd.solver): one serial loop for a small group on the CPU
+    (engine.geometry.colouring.serial_sweep), else a top-level loop a colour; one launch a sweep."""
     hh = ti.cast(h, g.dtype)
-    if ti.static(g.count <= SERIAL_MAX):  # every colour in order on this thread
+    if ti.static(serial_sweep(g.count)):  # every colour in order on this thread
         ti.loop_config(serialize=True)
         for q in range(g.count):
             _project_one(g, X, w, hh, q)

@@ -5,13 +5,24 @@ same every run (deterministic, no atomics)."""
 import numpy as np
 
 
-# A group of at most this many constraints is swept on the calling thread, all its colours in
+# On the CPU backend a group of at most this many constraints is swept on the calling thread, all its colours in
 # order in one loop, not one parallel loop a colour: each colour's loop is a task that wakes the
 # thread pool (~20-40 µs on the CPU backend), far more than a few hundred constraints' arithmetic
 # (cloth_bending's 28 × 28 cloth: 12 iterations of springs and bending, 24 launches of ~10 colours
 # each). No two constraints of a colour share a node, so the serial sweep is the parallel one's
 # result bit for bit.
 SERIAL_MAX = 8192
+
+
+def serial_sweep(count: int) -> bool:
+    """Whether a group of ``count`` constraints is swept on one thread: at most SERIAL_MAX, and
+    on the CPU backend only (a GPU keeps a parallel loop a colour: one thread there is one of
+    thousands). Read at a kernel's compile time (``ti.static``)."""
+    if count > SERIAL_MAX:
+        return False
+    from ..runtime import _arch_in_use  # (lazily: this module is imported without Taichi)
+
+    return _arch_in_use() == "cpu"
 
 
 def greedy_colors(n_nodes: int, elems: np.ndarray):

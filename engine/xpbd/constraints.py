@@ -8,7 +8,7 @@ enters as the paper's β: γ = α̃·(h²β)/h = kd/(ks·h). |∇C|² = 1 on bot
 import taichi as ti
 
 from ..forces.terms import hooke_constraint
-from ..geometry.colouring import SERIAL_MAX
+from ..geometry.colouring import serial_sweep
 
 
 @ti.kernel
@@ -51,7 +51,7 @@ def sweep_serial(model: ti.template(), X: ti.template(), x_prev: ti.template(), 
 def _project(model: ti.template(), X: ti.template(), x_prev: ti.template(), w: ti.template(),
              lam: ti.template(), h: ti.f64):
     hh = ti.cast(h, model.dtype)
-    if ti.static(model.spring_count <= SERIAL_MAX):  # every colour in order on this thread
+    if ti.static(serial_sweep(model.spring_count)):  # every colour in order on this thread
         ti.loop_config(serialize=True)
         for q in range(model.spring_count):
             project_spring(model, X, x_prev, w, lam, hh, model.color_spring[q])
