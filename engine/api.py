@@ -16,7 +16,8 @@ then writes the scene's :class:`~engine.control.Control` (this frame's inputs) o
 Fields and kernels were built by :class:`~engine.scene.Scene`; a discarded scene (``close()`` or
 garbage) is kept for the next scene of the same config (:mod:`engine.reuse`), so a level restart
 compiles nothing. Adding or removing emitters, colliders or bodies rebuilds the scene between
-frames and carries live particles, emitter clocks, inputs and soft bodies over by name.
+frames and carries live particles, emitter clocks, inputs and soft bodies over by name
+(:mod:`engine.api_edit`).
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ import numpy as np
 
 from . import checks, reuse, runtime
 from .budget import fit, hold, particle_budget, release, set_particle_budget
+from .api_edit import SceneEdits, _load, _shallow
 from .api_potential import PotentialAPI
 from .api_rigid import RigidAPI
 from .api_soft import SoftBodyAPI
@@ -35,7 +37,7 @@ from .builder import ConfigBuilder
 from .checks import COORD, MAX_CONTACTS, MAX_DT, MAX_STEPS_PER_CALL, boolean, integer, number, vector
 from .particles.capacity import MAX_POOL
 from .clock import FixedTimestep
-from .config import ConfigError, config_data, load_config
+from .config import ConfigError, config_data
 from .contacts import Contacts
 from .render.camera import Camera
 from .scene import Scene
@@ -47,32 +49,13 @@ __all__ = ["ParticleScene", "SceneBuilder", "FixedTimestep", "Camera", "Contacts
            "particle_budget"]
 
 
-def _load(where: str, data: dict):
-    try:
-        return load_config(data)
-    except ConfigError as e:
-        raise ValueError(f"{where}: {'; '.join(e.problems)}") from None
-
-
-def _shallow(where: str, data) -> None:
-    """Refuse data nested deeper than a config can be (before deepcopy or the checks recurse
-    into it: a 100,000-deep dict is one line, not a RecursionError)."""
-    from .config.load import MAX_DEPTH, check_depth
-
-    try:
-        check_depth(data)
-    except ConfigError:
-        raise ValueError(f"{where}: dicts and lists nested more than {MAX_DEPTH} levels deep are not allowed "
-                         f"(a config needs 5)") from None
-
-
 def _discard(key, scene, token, program) -> None:
     """A ParticleScene went away: its slots return to the budget, its scene to the pool."""
     release(token)
     reuse.give_back(key, scene, program)
 
 
-class ParticleScene(RigidAPI, SoftBodyAPI, PotentialAPI):
+class ParticleScene(SceneEdits, RigidAPI, SoftBodyAPI, PotentialAPI):
     """A scene driven from Python. Build with :meth:`from_file`, :meth:`from_dict` or
     :class:`SceneBuilder`. Several can live in one process; ``engine.runtime.init`` is called
     once for all of them (or skipped when the host initialised Taichi itself).
@@ -374,73 +357,6 @@ class ParticleScene(RigidAPI, SoftBodyAPI, PotentialAPI):
         if s.renderer is None:
             raise RuntimeError("render: this scene was built with render=False")
         return s.render(w, h, cam, show, out=out, transparent=flags[0], bgra=flags[1], alpha=alpha)
-
-    # -- changing what the scene holds (rebuilds between frames) -----------------------------------
-    def _rebuild(self, where: str, data: dict) -> None:
-        old = self._live(where)
-        self._install(data, where, previous=old)
-        # potentials carry over (compiled again for the new pool); one whose named emitters are
-        # all gone goes with them
-        known, kept = {e.name for e in self.cfg.emitters}, []
-        for fn, p, chosen, name in self._potentials:
-            if chosen is not None:
-                chosen = tuple(n for n in chosen if n in known)
-                if not chosen:
-                    continue
-            kept.append((fn, p, chosen, name))
-        self._potentials = kept
-        if self.scene.particles is not None:
-            for spec in kept:
-                self._attach(where, self.scene, spec)
-
-    def _add(self, where: str, key: str, item) -> None:
-        if not isinstance(item, dict):
-            raise TypeError(f"{where}: {checks.show(item)} is not a dict of config keys")
-        _shallow(f"{where}: {key[:-1] if key != 'bodies' else 'body'}", item)
-        data = copy.deepcopy(self._data)
-        data.setdefault(key, []).append(checks.plain(copy.deepcopy(item)))
-        self._rebuild(where, data)
-
-    def _remove(self, where: str, key: str, name: str) -> None:
-        data = copy.deepcopy(self._data)
-        data[key] = [x for x in data.get(key, []) if x.get("name") != name]
-        self._rebuild(where, data)
-
-    def add_emitter(self, emitter: dict) -> None:
-        """Add an emitter (a dict of config keys) between frames. One whose needs the scene
-        already compiled (its blend mode and force terms; no sub-emitters) and that fits the
-        spare rows and slots is written into them: nothing compiles. Otherwise the scene is
-        rebuilt around it (a compile), carrying live particles over."""
-        s = self._live("add_emitter")
-        if not isinstance(emitter, dict):
-            raise TypeError(f"add_emitter: {checks.show(emitter)} is not a dict of config keys")
-        _shallow("add_emitter: emitter", emitter)
-        data = copy.deepcopy(self._data)
-        data.setdefault("emitters", []).append(checks.plain(copy.deepcopy(emitter)))
-        cfg = _load("add_emitter", data)
-        self.last_add = s.why_not_add(cfg)  # None: added in place
-        if self.last_add is None:
-            s.add_emitters(cfg)
-            self.cfg, self._data = cfg, data
-        else:
-            self._rebuild("add_emitter", data)
-
-    def remove_emitter(self, name: str) -> None:
-        self._live("remove_emitter")
-        self._remove("remove_emitter", "emitters", self.cfg.emitters[self._emitter("remove_emitter", name)].name)
-
-    def add_collider(self, collider: dict) -> None:
-        self._add("add_collider", "colliders", collider)
-
-    def remove_collider(self, name: str) -> None:
-        self._live("remove_collider")
-        self._remove("remove_collider", "colliders", self.cfg.colliders[self._collider("remove_collider", name)].name)
-
-    def add_body(self, body: dict) -> None:
-        self._add("add_body", "bodies", body)
-
-    def remove_body(self, name: str) -> None:
-        self._remove("remove_body", "bodies", self._body("remove_body", name).cfg.name)
 
 
 class SceneBuilder(ConfigBuilder):
