@@ -61,7 +61,7 @@ class Interactions(FluidTerms):
     the step's end before the solve, m and m/s), ``corr`` (vec3 f32: the solve's total Δx, m),
     ``delta`` (a sweep's Jacobi Δx); fluid adds ``lam`` (f32), ``omega`` (vec3, 1/s), ``vbuf``."""
 
-    def __init__(self, state, configs, rows: int, colliders, sizes=None):
+    def __init__(self, state, configs, rows: int, colliders, sizes=None, starts=None):
         self.state, self.cap = state, max(1, state.capacity)
         self.colliders = colliders
         self.has_colliders = colliders is not None and colliders.count > 0
@@ -77,11 +77,10 @@ class Interactions(FluidTerms):
         # order; emitters added later never interact: engine.particles.system): every per-slot
         # loop runs over [lo, hi) only — a game's pool keeps spare slots (water: 2,508 of 18,892)
         self.lo, self.hi = 0, self.cap
-        if sizes:
-            starts = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        if sizes and starts:  # (the pool's PoolLayout: ring e is [starts[e], starts[e] + sizes[e]))
             on = [e for e in range(len(sizes)) if kinds[e] != 0]
             if on:
-                self.lo, self.hi = int(starts[min(on)]), int(starts[max(on) + 1])
+                self.lo, self.hi = int(starts[min(on)]), int(starts[max(on)] + sizes[max(on)])
         self.granular, self.fluid = "granular" in self.params, "fluid" in self.params
         self.gravity, self.repel = "gravity" in self.params, "repel" in self.params
         n = self.cap

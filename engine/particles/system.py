@@ -73,7 +73,8 @@ class ParticleSystem(SystemBase):
         if any(e.interact is not None for e in cfg.emitters) and self.layout.capacity:
             from .interact import Interactions
 
-            self.interact = Interactions(self.state, cfg.emitters, rows, colliders, sizes=self.layout.sizes)
+            self.interact = Interactions(self.state, cfg.emitters, rows, colliders, sizes=self.layout.sizes,
+                                         starts=self.layout.starts)
         self.order = METHODS[self.method].order
         atol = sol.atol if sol.atol is not None else sol.tolerance
         self.atol, self.rtol = atol, sol.tolerance
