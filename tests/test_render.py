@@ -223,3 +223,64 @@ def test_once_every_particle_is_gone_the_frame_is_the_background_again(schedule)
         assert np.array_equal(s.render(), background)
     assert t.lo_clear
     s.close()
+
+
+def _fresh_edges(s, t):
+    """The image the renderer draws with every cached edge flag forgotten (recomputed); first,
+    that every flag the cache held for a tile the composite reads it for is the recomputed one."""
+    cached = t.edges.to_numpy()
+    t.edges.fill(-1)
+    img = s.render()
+    fresh = t.edges.to_numpy()
+    known = fresh >= 0
+    assert np.array_equal(cached[known], fresh[known]), np.flatnonzero(cached[known] != fresh[known])
+    return img
+
+
+def test_cached_edge_flags_follow_the_camera():
+    """The composite caches per tile whether the reduced layer's upsample is bilateral anywhere
+    in it (depths only). Smoke over a ground plane seen from a camera tilting down: the horizon,
+    where the upsample is bilateral, moves, and each frame equals one drawn with the flags
+    recomputed from nothing (a stale flag would leave the old horizon's tiles bilinear)."""
+    s = _scene("configs/flames.toml", frames=40, size=(320, 180), particle_resolution=0.25)
+    t = s.renderer.targets(320, 180)
+    cam = s.camera
+    seen = []
+    for k, y in enumerate((0.9, 0.2, -0.6)):
+        s.camera = cam.__class__(cam.position, (cam.look_at[0], y, cam.look_at[2]), cam.fov)
+        img = s.render()
+        seen.append(t.edges.to_numpy())
+        assert np.array_equal(_fresh_edges(s, t), img), k
+        assert np.array_equal(t.edges.to_numpy(), seen[-1])
+    # the flags changed with the view (the test is not vacuous): some tile edged in one, not another
+    assert all((a == 1).any() for a in seen)
+    assert any(((a == 1) & (b == 0)).any() for a, b in zip(seen, seen[1:]))
+
+
+def test_cached_edge_flags_follow_a_moving_body():
+    """A jelly falls through a cloud of smoke, drawn into the frame's own depth: where it drew this
+    frame or the last, and next to it, the flags are recomputed — every cached flag equals the
+    recomputed one and each frame the image drawn with all of them recomputed (checked to fail
+    with only the drawn tiles themselves recomputed: a tile's upsample reads texels 4 px into
+    its neighbours)."""
+    s = ParticleScene.from_dict({
+        "name": "jelly through smoke", "fps": 30, "frames": 30,
+        "camera": {"position": [0.0, 1.0, 6.0], "look_at": [0.0, 1.0, 0.0]},
+        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
+        "emitters": [{"name": "cloud", "effect": "smoke", "shape": "sphere", "radius": 1.2,
+                      "position": [0.0, 1.0, 0.0], "speed": [0.0, 0.05], "turbulence": 0.0,
+                      "bursts": [{"time": 0.0, "count": 300}], "lifetime": 5.0,
+                      "size": [[0.0, 0.6]], "alpha": [[0.0, 0.3]]}],
+        "bodies": [{"type": "jelly", "name": "jelly", "resolution": [4, 4, 4], "size": [0.8, 0.8, 0.8],
+                    "position": [-0.4, 2.6, 1.0], "mass": 0.01, "stiffness": 300.0}]})
+    s.render()
+    t = s.scene.renderer.targets(320, 180)
+    changed = 0
+    for k in range(12):
+        s.step(1 / 30)
+        before = t.edges.to_numpy()
+        img = s.render().copy()
+        changed += int(((before == 0) & (t.edges.to_numpy() == 1)).any())
+        assert np.array_equal(_fresh_edges(s, t), img), k
+    assert changed > 0  # the jelly made some tile's upsample bilateral on its way (not vacuous)
+    s.close()

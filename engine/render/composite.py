@@ -100,6 +100,26 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
         return pack(c * exposure, 1.0 - (1.0 - cover) * lo[3] * full[3], mode & 2)
 
     @ti.func
+    def lo_quad(px, py, s, Wl, Hl):
+        """The four reduced texels around full-resolution pixel (px, py): rows ja, jb, columns
+        xa, xb (clamped to the level) and the bilinear fractions (fx, fy)."""
+        v = (py + 0.5) * s - 0.5
+        j0 = ti.cast(ti.floor(v), ti.i32)
+        fy = v - j0
+        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+        u = (px + 0.5) * s - 0.5
+        i0 = ti.cast(ti.floor(u), ti.i32)
+        fx = u - i0
+        xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+        return ja, jb, xa, xb, fx, fy
+
+    @ti.func
+    def quad_is_edge(z00, z10, z01, z11, z):
+        """Whether the four texels' depths differ by more than 10 % of the pixel's depth z (then
+        the upsample is bilateral at this pixel)."""
+        return ti.max(z00, z10, z01, z11) - ti.min(z00, z10, z01, z11) > 0.1 * z
+
+    @ti.func
     def lo_sample(px, py, z, lo: ti.template(), rows: ti.template(), depth_lo: ti.template(), LO, W,
                   Wl, Hl, s, edge):
         """The reduced layer at full-resolution pixel (px, py) of depth z, bilinear: a vertical
@@ -107,20 +127,13 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
         reduced depths differ by more than 10 % (``edge``: a silhouette, not a receding floor) and
         at this pixel too, bilateral instead: each of the four texels weighs bilinear ×
         1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface."""
-        v = (py + 0.5) * s - 0.5
-        j0 = ti.cast(ti.floor(v), ti.i32)
-        fy = v - j0
-        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+        ja, jb, xa, xb, fx, fy = lo_quad(px, py, s, Wl, Hl)
         out = (1.0 - fy) * rows[ja * W + px] + fy * rows[jb * W + px]
         if edge != 0:
-            u = (px + 0.5) * s - 0.5
-            i0 = ti.cast(ti.floor(u), ti.i32)
-            fx = u - i0
-            xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
             ra, rb = LO + ja * Wl, LO + jb * Wl
             z00, z10 = depth_lo[ra + xa], depth_lo[ra + xb]
             z01, z11 = depth_lo[rb + xa], depth_lo[rb + xb]
-            if ti.max(z00, z10, z01, z11) - ti.min(z00, z10, z01, z11) > 0.1 * z:
+            if quad_is_edge(z00, z10, z01, z11, z):
                 iz = 1.0 / z
                 w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(z00 - z) * iz)
                 w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(z10 - z) * iz)
@@ -129,6 +142,25 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                 out = (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa]
                        + w11 * lo[rb + xb]) / (w00 + w10 + w01 + w11)
         return out
+
+    @ti.func
+    def tile_is_edge(px0, py0, px1, py1, dep: ti.template(), LO, W, Wl, Hl, s):
+        """Whether ``lo_sample`` goes bilateral at any pixel of the tile: ``lo_edge`` (the tile's
+        test) and, at some pixel, ``quad_is_edge`` (the pixel's) — where neither holds the tile is
+        bilinear throughout, the same values the hoisted bilinear path gives. A receding floor
+        passes the tile's test (its depth grows by more than 10 % over a tile's footprint beyond
+        a few metres) and fails the pixel's (over two texels it grows by less)."""
+        e = lo_edge(px0, py0, px1, py1, dep, LO, Wl, Hl, s)
+        if e != 0:
+            e = 0
+            for y in range(py0, py1 + 1):
+                for x in range(px0, px1 + 1):
+                    ja, jb, xa, xb, fx, fy = lo_quad(x, y, s, Wl, Hl)
+                    ra, rb = LO + ja * Wl, LO + jb * Wl
+                    if quad_is_edge(dep[ra + xa], dep[ra + xb], dep[rb + xa], dep[rb + xb],
+                                    dep[y * W + x]):
+                        e = 1
+        return e
 
     @ti.func
     def lo_edge(px0, py0, px1, py1, depth_lo: ti.template(), LO, Wl, Hl, s):
@@ -340,19 +372,46 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                     xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
                     rows[j * W + x] = (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
 
+    @ti.func
+    def reduced_row(rows: ti.template(), bgc: ti.template(), out: ti.template(), ra, rb, k0, px0, fy,
+                    exposure, mode):
+        """A whole tile row (TILE pixels from k0 = y·W + px0) of the reduced layer alone over the
+        background: all loads and table lookups first, then the stores (a store through an
+        ndarray makes every later load re-read its array's address: none come between them)."""
+        vals = ti.Vector([0] * TILE, dt=ti.u32)
+        for dx in ti.static(range(TILE)):
+            low = (1.0 - fy) * rows[ra + px0 + dx] + fy * rows[rb + px0 + dx]
+            vals[dx] = finish(bgc[k0 + dx], low, EMPTY_LAYER, exposure, mode)
+        for dx in ti.static(range(TILE)):
+            out[k0 + dx] = vals[dx]
+
     @ti.kernel
     def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, bgc: ND_V4, dep: ND_F,
-                        bg_packed: ND_U32, out: ND_U32, dirty: ND_I1, touched_lo: ND_I1,
-                        TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32, Wl: ti.i32,
-                        Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32, shading: ti.f32,
-                        mode: ti.i32):
+                        bg_packed: ND_U32, out: ND_U32, dirty: ND_I1, dirty_prev: ND_I1,
+                        touched_lo: ND_I1, edges: ND_I1, ex0: ti.i32, ey0: ti.i32, ex1: ti.i32,
+                        ey1: ti.i32, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
+                        Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
+                        shading: ti.f32, mode: ti.i32):
         """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
-        the background, tone-mapped and packed. An untouched tile copies the packed background."""
+        the background, tone-mapped and packed. An untouched tile copies the packed background.
+
+        ``edges`` (TX·TY,) caches ``tile_is_edge`` per tile (−1: not known), for it depends on the
+        depths alone, which change only where the background was redrawn — the tiles
+        [ex0, ex1] × [ey0, ey1] (empty when ex0 > ex1), given with one tile of margin, since a
+        tile's upsample reads texels up to 2 / s pixels past its edge — or where soft bodies
+        drew this frame or the last (``dirty``, ``dirty_prev``: a tile next to such a tile too)."""
         ti.loop_config(block_dim=1)
         for t in range(TX * TY):
-            px0, py0 = (t % TX) * TILE, (t // TX) * TILE
+            tx, ty = t % TX, t // TX
+            px0, py0 = tx * TILE, ty * TILE
             px1, py1 = ti.min(W - 1, px0 + TILE - 1), ti.min(H - 1, py0 + TILE - 1)
             n = tile_count[t]
+            stale = ex0 <= tx and tx <= ex1 and ey0 <= ty and ty <= ey1
+            for j in range(ti.max(0, ty - 1), ti.min(TY - 1, ty + 1) + 1):
+                for i in range(ti.max(0, tx - 1), ti.min(TX - 1, tx + 1) + 1):
+                    stale |= dirty[j * TX + i] != 0 or dirty_prev[j * TX + i] != 0
+            if stale:
+                edges[t] = -1
             near = 0
             if has_lo != 0:
                 near = lo_near(px0, py0, px1, py1, touched_lo, Wl, Hl, TXl, s)
@@ -363,7 +422,10 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
             else:
                 edge = 0
                 if near != 0:
-                    edge = lo_edge(px0, py0, px1, py1, dep, W * H, Wl, Hl, s)
+                    edge = edges[t]
+                    if edge < 0:
+                        edge = tile_is_edge(px0, py0, px1, py1, dep, W * H, W, Wl, Hl, s)
+                        edges[t] = edge
                 if n == 0 and edge == 0 and near != 0:
                     # the common case under smoke: the reduced layer alone, bilinear; the row
                     # terms hoisted by hand (two loads and a lerp per pixel)
@@ -373,16 +435,14 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
                         fy = v - j0
                         ra = ti.min(ti.max(j0, 0), Hl - 1) * W
                         rb = ti.min(ti.max(j0 + 1, 0), Hl - 1) * W
-                        if px1 - px0 == TILE - 1:
-                            # a whole row of the tile: all loads and table lookups first, then the
-                            # 16 stores (a store through an ndarray makes every later load re-read
-                            # its array's address: none come between them here)
-                            vals = ti.Vector([0] * TILE, dt=ti.u32)
-                            for dx in ti.static(range(TILE)):
-                                low = (1.0 - fy) * rows[ra + px0 + dx] + fy * rows[rb + px0 + dx]
-                                vals[dx] = finish(bgc[y * W + px0 + dx], low, EMPTY_LAYER, exposure, mode)
-                            for dx in ti.static(range(TILE)):
-                                out[y * W + px0 + dx] = vals[dx]
+                        if px1 - px0 == TILE - 1:  # a whole row of the tile
+                            # (opaque RGBA, the usual mode, compiled apart with the mode a
+                            # constant: its tests and swaps folded away)
+                            if mode == 0:
+                                reduced_row(rows, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, 0)
+                            else:
+                                reduced_row(rows, bgc, out, ra, rb, y * W + px0, px0, fy, exposure,
+                                            mode)
                         else:
                             for x in range(px0, px1 + 1):
                                 low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]

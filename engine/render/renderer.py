@@ -189,8 +189,14 @@ class Renderer:
             self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
                                int(TILE * t.scale) + 3)
         if self.schedule == "tiles":
+            # the tiles whose cached edge flag the redrawn background makes stale (one of margin)
+            ex0, ey0, ex1, ey1 = 1, 1, 0, 0
+            if rect is not None:
+                ex0, ey0 = rect[0] // TILE - 1, rect[1] // TILE - 1
+                ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
             self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, bgc, dep, t.bg_packed,
-                                       packed, t.dirty, t.touched_lo, *common)
+                                       packed, t.dirty, t.dirty_prev if t.mesh else t.dirty,
+                                       t.touched_lo, t.edges, ex0, ey0, ex1, ey1, *common)
         else:
             self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,
                                         dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)

@@ -11,7 +11,8 @@ that hold sprites (the reduced part ends as the layer (RGB, T)); ``touched_lo`` 
 tiles holding sprites. Tiles: ``hist``
 (chunks, T) i32, ``tile_count``/``tile_start`` (T,), ``block_sum``, ``pairs`` (grows). Soft bodies:
 ``vis`` i64 visibility buffer, ``lines`` ivec4 line sums, ``fbg``/``fdep`` the frame's background
-with the bodies drawn in, ``dirty``/``dirty_prev`` (T0,) tiles the bodies touch.
+with the bodies drawn in, ``dirty``/``dirty_prev`` (T0,) tiles the bodies touch. ``edges`` (T0,) the composite's cache of
+which tiles' upsample is bilateral somewhere (engine.render.composite).
 """
 from __future__ import annotations
 
@@ -67,6 +68,8 @@ class FrameTargets:
         self.block_sum = ti.ndarray(ti.i32, shape=self.NB)
         self.dirty = ti.ndarray(ti.i32, shape=self.T0)
         self.dirty.fill(0)
+        self.edges = ti.ndarray(ti.i32, shape=self.T0)
+        self.edges.fill(-1)  # per tile: is the upsample bilateral anywhere (-1: not yet known)
         self.pairs = None
         self.grow_pairs(pairs)
         self.mesh = mesh
