@@ -1,0 +1,144 @@
+"""The reduced layer's upsample to full resolution (Cantlay 2007): which tiles read it, its rows
+interpolated along x, and the bilinear or bilateral sample a pixel takes of it.
+
+Bilinear where the reduced depths under a pixel agree; bilateral (depth-aware) where they differ by
+more than 10 % of the pixel's depth: each of the four nearest texels weighs bilinear ×
+1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface. Whether
+a tile needs the bilateral weights anywhere (``tile_is_edge``) depends on depths alone, so the
+composite keeps it per tile (engine.render.composite).
+
+The reduced level is stored after the full one in the same flat arrays: texel (x, y) at
+LO + y·Wl + x, LO = W·H.
+"""
+# (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
+
+import taichi as ti
+
+from .sprites import TILE
+
+vec4 = ti.types.vector(4, ti.f32)
+# pixel arrays are flat, (H·W,) in row-major order, indexed y·W + x: a 2-D ndarray recomputes
+# its strides at every access (measured 1.2–1.7× slower in these loops than a flat index)
+ND_V4 = ti.types.ndarray(dtype=vec4, ndim=1)
+ND_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+
+
+@ti.func
+def lo_quad(px, py, s, Wl, Hl):
+    """The four reduced texels around full-resolution pixel (px, py): rows ja, jb, columns
+    xa, xb (clamped to the level) and the bilinear fractions (fx, fy)."""
+    v = (py + 0.5) * s - 0.5
+    j0 = ti.cast(ti.floor(v), ti.i32)
+    fy = v - j0
+    ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+    u = (px + 0.5) * s - 0.5
+    i0 = ti.cast(ti.floor(u), ti.i32)
+    fx = u - i0
+    xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+    return ja, jb, xa, xb, fx, fy
+
+
+@ti.func
+def quad_is_edge(z00, z10, z01, z11, z):
+    """Whether the four texels' depths differ by more than 10 % of the pixel's depth z (then
+    the upsample is bilateral at this pixel)."""
+    return ti.max(z00, z10, z01, z11) - ti.min(z00, z10, z01, z11) > 0.1 * z
+
+
+@ti.func
+def lo_sample(px, py, z, lo: ti.template(), rows: ti.template(), depth_lo: ti.template(), LO, W,
+              Wl, Hl, s, edge):
+    """The reduced layer at full-resolution pixel (px, py) of depth z, bilinear: a vertical
+    lerp between two rows already interpolated along x (``lo_rows``). In a tile where the
+    reduced depths differ by more than 10 % (``edge``: a silhouette, not a receding floor) and
+    at this pixel too, bilateral instead: each of the four texels weighs bilinear ×
+    1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface."""
+    ja, jb, xa, xb, fx, fy = lo_quad(px, py, s, Wl, Hl)
+    out = (1.0 - fy) * rows[ja * W + px] + fy * rows[jb * W + px]
+    if edge != 0:
+        ra, rb = LO + ja * Wl, LO + jb * Wl
+        z00, z10 = depth_lo[ra + xa], depth_lo[ra + xb]
+        z01, z11 = depth_lo[rb + xa], depth_lo[rb + xb]
+        if quad_is_edge(z00, z10, z01, z11, z):
+            iz = 1.0 / z
+            w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(z00 - z) * iz)
+            w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(z10 - z) * iz)
+            w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(z01 - z) * iz)
+            w11 = fx * fy / (1e-3 + ti.abs(z11 - z) * iz)
+            out = (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa]
+                   + w11 * lo[rb + xb]) / (w00 + w10 + w01 + w11)
+    return out
+
+
+@ti.func
+def tile_is_edge(px0, py0, px1, py1, dep: ti.template(), LO, W, Wl, Hl, s):
+    """Whether ``lo_sample`` goes bilateral at any pixel of the tile: ``lo_edge`` (the tile's
+    test) and, at some pixel, ``quad_is_edge`` (the pixel's) — where neither holds the tile is
+    bilinear throughout, the same values the hoisted bilinear path gives. A receding floor
+    passes the tile's test (its depth grows by more than 10 % over a tile's footprint beyond
+    a few metres) and fails the pixel's (over two texels it grows by less)."""
+    e = lo_edge(px0, py0, px1, py1, dep, LO, Wl, Hl, s)
+    if e != 0:
+        e = 0
+        for y in range(py0, py1 + 1):
+            for x in range(px0, px1 + 1):
+                ja, jb, xa, xb, fx, fy = lo_quad(x, y, s, Wl, Hl)
+                ra, rb = LO + ja * Wl, LO + jb * Wl
+                if quad_is_edge(dep[ra + xa], dep[ra + xb], dep[rb + xa], dep[rb + xb],
+                                dep[y * W + x]):
+                    e = 1
+    return e
+
+
+@ti.func
+def lo_edge(px0, py0, px1, py1, depth_lo: ti.template(), LO, Wl, Hl, s):
+    """Whether the reduced depths a tile's upsample reads differ by more than 10 % (then the
+    bilateral weights are needed; elsewhere bilinear is the same and cheaper)."""
+    lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * s - 0.5), ti.i32))
+    lx1 = ti.min(Wl - 1, ti.cast(ti.floor((px1 + 0.5) * s - 0.5), ti.i32) + 1)
+    ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * s - 0.5), ti.i32))
+    ly1 = ti.min(Hl - 1, ti.cast(ti.floor((py1 + 0.5) * s - 0.5), ti.i32) + 1)
+    lo_z, hi_z = 1e30, 0.0
+    for ly in range(ly0, ly1 + 1):
+        for k in range(LO + ly * Wl + lx0, LO + ly * Wl + lx1 + 1):
+            lo_z = ti.min(lo_z, depth_lo[k])
+            hi_z = ti.max(hi_z, depth_lo[k])
+    return ti.select(hi_z - lo_z > 0.1 * lo_z, 1, 0)
+
+
+@ti.func
+def lo_near(px0, py0, px1, py1, touched_lo: ti.template(), Wl, Hl, TXl, s):
+    """Whether any reduced-layer tile the upsample reads for this tile holds sprites."""
+    lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * s - 0.5), ti.i32))
+    lx1 = ti.min(Wl - 1, ti.cast(ti.floor((px1 + 0.5) * s - 0.5), ti.i32) + 1)
+    ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * s - 0.5), ti.i32))
+    ly1 = ti.min(Hl - 1, ti.cast(ti.floor((py1 + 0.5) * s - 0.5), ti.i32) + 1)
+    near = 0
+    for ly in range(ly0 // TILE, ly1 // TILE + 1):
+        for lx in range(lx0 // TILE, lx1 // TILE + 1):
+            near |= touched_lo[ly * TXl + lx]
+    return near
+
+
+@ti.kernel
+def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32,
+            touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32):
+    """The reduced layer's rows interpolated along x at every full-resolution column:
+    rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
+    vertical half with two loads per pixel instead of four) — only the rows the composite
+    can read: it reads row j for a tile whose footprint (rows ``lo_near`` spans, fewer than
+    R = TILE·s + 3) holds a reduced tile drawn this frame, so row j is needed only when a
+    drawn reduced tile lies within R rows of it (the rest are left as they were, unread)."""
+    LO = W * H
+    for j in range(Hl):
+        need = 0
+        for tr in range(ti.max(0, j - R) // TILE, ti.min(TYl - 1, (j + R) // TILE) + 1):
+            for tx in range(TXl):
+                need |= touched_lo[tr * TXl + tx]
+        if need != 0:
+            for x in range(W):
+                u = (x + 0.5) * s - 0.5
+                i0 = ti.cast(ti.floor(u), ti.i32)
+                fx = u - i0
+                xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+                rows[j * W + x] = (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
