@@ -37,21 +37,50 @@ def test_particle_frames_kept(name):
     assert_same_particles(particle_frames(name, FRAME_SHOTS[name]), want)
 
 
+PINNED_FRAMES = 8  # the adaptive particle scene's frames whose step sizes are pinned exactly
+DRIFT = 0.05  # m: how far its particles may end from the fixture's (they travel metres)
+
+
 @pytest.mark.slow
 def test_adaptive_particle_step_sizes_kept():
+    """The first PINNED_FRAMES frames' step sizes to rounding; after them the count of steps and
+    rejections within a margin, the same slots alive, and the particles within DRIFT. The scene
+    is turbulent and bounces particles off a sphere, so a rounding difference grows: on an Intel
+    Xeon with AVX-512 (the fixture was recorded on an AMD EPYC; Taichi compiles for the CPU it
+    runs on, with fast math) the sequence was the fixture's to 1e-9 for 91 steps (frame 12),
+    then one step differed by 0.2 %, and at frame 24 the particles were up to 8.7 mm from the
+    fixture's (210 steps against 211, rejections the same 2)."""
     want, got = fixture("h_particles"), adaptive_particles()
     assert want["rejected"] > 0 and want["per_frame"].max() > 4  # a sequence worth pinning
-    np.testing.assert_array_equal(got["per_frame"], want["per_frame"])
-    np.testing.assert_allclose(got["h"], want["h"], rtol=1e-9)
-    assert int(got["rejected"]) == int(want["rejected"])
-    assert_same_particles(got, want)
+    pinned = int(want["per_frame"][:PINNED_FRAMES].sum())
+    np.testing.assert_array_equal(got["per_frame"][:PINNED_FRAMES], want["per_frame"][:PINNED_FRAMES])
+    np.testing.assert_allclose(got["h"][:pinned], want["h"][:pinned], rtol=1e-9)
+    steps, steps_then = int(got["per_frame"].sum()), int(want["per_frame"].sum())
+    assert abs(steps - steps_then) <= 0.1 * steps_then, (steps, steps_then)
+    assert abs(int(got["rejected"]) - int(want["rejected"])) <= 1
+    np.testing.assert_array_equal(got["slot"], want["slot"])
+    np.testing.assert_array_equal(got["emitter"], want["emitter"])
+    np.testing.assert_allclose(got["pos"], want["pos"], rtol=0, atol=DRIFT)
+
+
+OPENING = 6  # the adaptive cloth's first steps (its first guess, the controller's growth and cuts after it)
 
 
 def test_adaptive_cloth_step_sizes_kept():
+    """The controller's opening steps to float32 rounding, the whole sequence's count of steps
+    and rejections within a margin, and where the cloth ends up to TOL. Not the whole sequence
+    exactly: the cloth's error estimate is a difference of float32 positions near the tolerance,
+    so the rounding of another CPU's code moves it — on an Intel Xeon with AVX-512 (the fixture
+    was recorded on an AMD EPYC; Taichi compiles for the CPU it runs on, with fast math) h
+    differed from the fixture's in its 7th digit at step 6, and from there the sequence drifted (217 steps against 197, the
+    same one rejection, positions within 8.3e-7 m). A change of the controller's policy moves
+    the opening steps (or the count) by far more."""
     want, got = fixture("h_cloth"), adaptive_cloth()
-    np.testing.assert_array_equal(got["per_frame"], want["per_frame"])
-    np.testing.assert_allclose(got["h"], want["h"], rtol=1e-9)
-    assert int(got["rejected"]) == int(want["rejected"])
+    assert want["per_frame"].min() >= 1 and int(want["rejected"]) >= 1  # a sequence worth pinning
+    np.testing.assert_allclose(got["h"][:OPENING], want["h"][:OPENING], rtol=1e-5)
+    steps, steps_then = int(got["per_frame"].sum()), int(want["per_frame"].sum())
+    assert abs(steps - steps_then) <= 0.15 * steps_then, (steps, steps_then)
+    assert abs(int(got["rejected"]) - int(want["rejected"])) <= 1
     np.testing.assert_allclose(got["pos"], want["pos"], **TOL)
 
 
