@@ -18,9 +18,12 @@ def test_readme_has_python_examples():
     assert len(python_blocks()) >= 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", range(len(python_blocks())))
 def test_readme_python_example_runs(k, tmp_path):
-    # one test per block: pytest-xdist spreads them over its workers
+    # one test per block: pytest-xdist spreads them over its workers. Slow (CI runs them, as it
+    # runs every documented command in test_commands.py): each block is a fresh process that
+    # compiles its scene's kernels, ~1 min of the default run's 5 (the first, crates, 40 s cold)
     code = python_blocks()[k]
     script = tmp_path / f"readme_{k}.py"
     script.write_text(code)
