@@ -92,8 +92,9 @@ class Emitters:
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
         if self.links:
             self.link_counts = ti.field(ti.i32, shape=CHUNKS)
-            # children of one pass whose ring slot was alive (parent slot + 1), by rank: at most a ring
-            self.link_moved = ti.field(ti.i32, shape=max(max(layout.sizes[c] for _, c, *_ in self.links), 1))
+            # the children of one pass by rank (at most a ring): parent slot, and slot (−1: none)
+            ring = max(max(layout.sizes[c] for _, c, *_ in self.links), 1)
+            self.link_parent, self.link_slot = ti.field(ti.i32, shape=ring), ti.field(ti.i32, shape=ring)
 
     def _arrays(self, cs) -> dict:
         """name → (array of shape (rows,) or (rows, 3), dtype) of every per-emitter parameter;
@@ -216,8 +217,8 @@ class Emitters:
     def spawn(self, plan) -> None:
         """Write a :meth:`plan`'s particles: one launch for all emitters (none for no plan)."""
         if plan is not None:
-            rows, vals, nrows, first, adv, moved = plan
-            _k.spawn(self, self.state, rows, vals, nrows, first, adv, moved)
+            rows, vals, nrows, first, adv, slots = plan
+            _k.spawn(self, self.state, rows, vals, nrows, first, adv, slots)
 
     def emit(self, t0: float, h: float) -> None:
         """Write everything due in [t0, t0 + h) before the step [t0, t0 + h) is taken."""
@@ -231,8 +232,8 @@ class Emitters:
             size = L.sizes[p]
             chunks = max(1, min(CHUNKS, size // CHUNK_MIN))
             _k.count_events(self.state, self.link_counts, L.starts[p], size, chunks, bit, min_speed)
-            _k.spawn_children(self, self.state, self.link_counts, self.link_moved, L.starts[p], size, chunks, bit,
-                              min_speed, c, L.starts[c], L.sizes[c], count)
+            _k.spawn_children(self, self.state, self.link_counts, self.link_parent, self.link_slot, L.starts[p],
+                              size, chunks, bit, min_speed, c, L.starts[c], L.sizes[c], count)
 
     def dropped_counts(self) -> np.ndarray:
         return self.dropped.to_numpy()[: len(self.configs)]

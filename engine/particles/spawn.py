@@ -97,32 +97,43 @@ def _born(E: ti.template(), S: ti.template(), rows: ti.template(), vals: ti.temp
     S.particle_age[slot] = -ti.max(0.0, ts - t0)  # born this long into the step
 
 
+@ti.func
+def _row_of(rows: ti.template(), nrows, q):
+    """The plan row whose particles include the launch's q-th (rows in ``R_FIRST`` order)."""
+    r = 0
+    while r + 1 < nrows and q >= rows[r + 1, R_FIRST]:
+        r += 1
+    return r
+
+
 @ti.kernel
 def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i32, ndim=2),
           vals: ti.types.ndarray(dtype=ti.f32, ndim=2), nrows: ti.i32, total: ti.i32,
-          adv: ti.types.ndarray(dtype=ti.i32, ndim=2), moved: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+          adv: ti.types.ndarray(dtype=ti.i32, ndim=2), slots: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     """Write the ``total`` particles of the plan: row r spawns k of emitter e at ring offset
     head + R_HEAD with serials from serial + R_SERIAL, born at stratified times in
     [ts0, ts0 + tspan) and written at the emitter's position then, with age −(t_s − t0): the step
-    kernel advances them from their birth. A slot still alive is not overwritten: that birth is
-    marked in ``moved`` (one entry per particle of the plan) and, after every ring slot of the
-    launch is written, takes the first free slot of its emitter's segment in slot order (one
-    thread per emitter walks its marked births in plan order: deterministic, no atomics decide a
-    slot), so a burst of long-lived particles does not starve the stream while the segment has
-    room; only a birth that finds no free slot is counted dropped. Then every emitter's ring head,
-    serial and dropped count advance by ``adv``."""
+    kernel advances them from their birth. A slot still alive is not overwritten: after every
+    ring slot of the launch is taken, such a birth takes the first free slot of its emitter's
+    segment in slot order (one thread per emitter walks them in plan order: deterministic, no
+    atomics decide a slot), so a burst of long-lived particles does not starve the stream while
+    the segment has room; only a birth that finds no free slot is counted dropped. Then every
+    emitter's ring head, serial and dropped count advance by ``adv``.
+
+    Three passes in one launch: each birth's slot into ``slots`` (−1: none; a slot taken is
+    marked alive at once, so the free-slot walk passes it), the free-slot walk, then every birth
+    written from one call site (``init_particle`` inlined once: it is most of this kernel's
+    compile)."""
     for q in range(total):
-        r = 0
-        while r + 1 < nrows and q >= rows[r + 1, R_FIRST]:
-            r += 1
+        r = _row_of(rows, nrows, q)
         e, j = rows[r, R_E], q - rows[r, R_FIRST]
         slot = rows[r, R_START] + (E.emitter_head[e] + rows[r, R_HEAD] + j) % rows[r, R_SIZE]
-        moved[q] = 0
+        slots[q] = -1
         if S.particle_alive[slot] != 0:
-            moved[q] = 1  # the ring caught up with a live particle: placed below
-            ti.atomic_add(E.emitter_moved[e], 1)
+            ti.atomic_add(E.emitter_moved[e], 1)  # the ring caught up with a live particle
         else:
-            _born(E, S, rows, vals, r, j, slot)
+            slots[q] = slot
+            S.particle_alive[slot] = 1
     for e in range(E.count):
         if E.emitter_moved[e] > 0:  # only when a ring slot was taken (nothing to do otherwise)
             E.emitter_moved[e] = 0
@@ -131,14 +142,21 @@ def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i3
                 if rows[r, R_E] == e:
                     start, size = rows[r, R_START], rows[r, R_SIZE]
                     for j in range(rows[r, R_K]):
-                        if moved[rows[r, R_FIRST] + j] != 0:
+                        q = rows[r, R_FIRST] + j
+                        if slots[q] < 0:
                             while cursor < size and S.particle_alive[start + cursor] != 0:
                                 cursor += 1
                             if cursor < size:
-                                _born(E, S, rows, vals, r, j, start + cursor)
+                                slots[q] = start + cursor
+                                S.particle_alive[start + cursor] = 1
                                 cursor += 1
                             else:
                                 E.dropped[e] += 1  # the segment is full
+    for q in range(total):
+        if slots[q] >= 0:
+            r = _row_of(rows, nrows, q)
+            _born(E, S, rows, vals, r, q - rows[r, R_FIRST], slots[q])
+    for e in range(E.count):  # (after the births: they read the serial numbers before it)
         if adv[e, A_SIZE] > 0:
             E.emitter_head[e] = (E.emitter_head[e] + adv[e, A_HEAD]) % adv[e, A_SIZE]
             E.emitter_serial[e] += adv[e, A_SERIAL]
@@ -172,26 +190,28 @@ def _child(E: ti.template(), S: ti.template(), i, c, sid, slot, bit):
     born where and when the impact was located: at the point on the surface, then moved along
     their velocity for the time left in the step (the age they start with)."""
     ti.atomic_add(E.emitter_emitted[c], 1)
+    centre = S.particle_pos[i]
+    if bit == EVENT_COLLISION:
+        centre = S.particle_impact_pos[i]
+    init_particle(E, S, slot, c, sid, centre, S.particle_vel[i])  # (one call site: see spawn)
     if bit == EVENT_COLLISION:  # born at the located impact, as old as it is
         lag = S.particle_impact_lag[i]
-        init_particle(E, S, slot, c, sid, S.particle_impact_pos[i], S.particle_vel[i])
         S.particle_pos[slot] += lag * S.particle_vel[slot]
         S.particle_age[slot] = lag
-    else:
-        init_particle(E, S, slot, c, sid, S.particle_pos[i], S.particle_vel[i])
 
 
 @ti.kernel
-def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), moved: ti.template(),
-                   p_start: ti.i32, p_size: ti.i32, chunks: ti.i32, bit: ti.i32, min_speed: ti.f32, c: ti.i32,
-                   c_start: ti.i32, c_size: ti.i32, count: ti.i32):
+def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), parent: ti.template(),
+                   slots: ti.template(), p_start: ti.i32, p_size: ti.i32, chunks: ti.i32, bit: ti.i32,
+                   min_speed: ti.f32, c: ti.i32, c_start: ti.i32, c_size: ti.i32, count: ti.i32):
     """Pass 2: each slice adds up the counts before it (its parents' first rank) and walks its
     parents in slot order; the n-th child of the pass takes ring slot head + n and serial
     serial + n. A child that would wrap onto a slot this pass already gave out (n ≥ ring size)
-    is counted dropped; one that finds its ring slot alive is marked in ``moved[n]`` (its parent
-    slot + 1) and, after the pass, takes the first free slot of the child segment in slot order
-    (one thread walks the marked children in n order: deterministic), or is counted dropped when
-    the segment is full."""
+    is counted dropped; one that finds its ring slot alive, after the pass, takes the first free
+    slot of the child segment in slot order (one thread walks them in n order: deterministic),
+    or is counted dropped when the segment is full. As in ``spawn``, the slots are chosen first
+    (``parent[n]``: the parent slot of child n; ``slots[n]``: its slot, −1 none; a slot taken is
+    marked alive at once) and every child is written after, from one call site."""
     h0, s0 = E.emitter_head[c], E.emitter_serial[c]
     size = (p_size + chunks - 1) // chunks
     for q in range(chunks):
@@ -205,28 +225,35 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), mo
                     slot = c_start + (h0 + n) % c_size
                     if n >= c_size:
                         ti.atomic_add(E.dropped[c], 1)
-                    elif S.particle_alive[slot] != 0:
-                        moved[n] = i + 1  # placed below, in a free slot
-                        ti.atomic_add(E.emitter_moved[c], 1)
                     else:
-                        moved[n] = 0
-                        _child(E, S, i, c, s0 + n, slot, bit)
+                        parent[n] = i
+                        slots[n] = -1
+                        if S.particle_alive[slot] != 0:
+                            ti.atomic_add(E.emitter_moved[c], 1)  # placed below, in a free slot
+                        else:
+                            slots[n] = slot
+                            S.particle_alive[slot] = 1
                 rank += 1
     total = 0
     for q in range(chunks):
         total += counts[q]
+    born = ti.min(total * count, c_size)
     for _ in range(1):  # one thread: the moved children in n order
         if E.emitter_moved[c] > 0:
             E.emitter_moved[c] = 0
             cursor = 0
-            for n in range(ti.min(total * count, c_size)):
-                if moved[n] != 0:
+            for n in range(born):
+                if slots[n] < 0:
                     while cursor < c_size and S.particle_alive[c_start + cursor] != 0:
                         cursor += 1
                     if cursor < c_size:
-                        _child(E, S, moved[n] - 1, c, s0 + n, c_start + cursor, bit)
+                        slots[n] = c_start + cursor
+                        S.particle_alive[c_start + cursor] = 1
                         cursor += 1
                     else:
                         E.dropped[c] += 1  # the segment is full
+    for n in range(born):
+        if slots[n] >= 0:
+            _child(E, S, parent[n], c, s0 + n, slots[n], bit)
     E.emitter_head[c] = (h0 + total * count) % c_size
     E.emitter_serial[c] = s0 + total * count
