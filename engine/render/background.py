@@ -209,15 +209,15 @@ def build_background_kernel(render_cfg, colliders):
 
 
 @ti.kernel
-def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, k: ti.i32,
+def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, at: ti.i32, Wk: ti.i32, k: ti.i32,
                      x0: ti.i32, y0: ti.i32, x1: ti.i32, y1: ti.i32, dirty: ND_I1, dirty_prev: ND_I1,
                      TX: ti.i32, tiles: ti.i32):
-    """The reduced level's depth, stored after the full-resolution one (depth[W·H + y·Wl + x]):
-    the farthest depth under each k×k block (Cantlay 2007: with the maximum, a reduced-resolution
-    particle is not hidden by a thin nearer edge inside its texel), for the texels [x0, x1) ×
-    [y0, y1) — and with ``tiles`` only those whose block lies in a 16×16 tile marked in ``dirty``
-    or ``dirty_prev`` (where soft bodies drew this frame or the last; k divides 16, so a block
-    never straddles two tiles)."""
+    """A reduced level's depth, stored after the full-resolution one (depth[at + y·Wk + x]: the
+    reduced level at W·H, the coarse one after it): the farthest depth under each k×k block
+    (Cantlay 2007: with the maximum, a reduced-resolution particle is not hidden by a thin nearer
+    edge inside its texel), for the texels [x0, x1) × [y0, y1) — and with ``tiles`` only those
+    whose block lies in a 16×16 tile marked in ``dirty`` or ``dirty_prev`` (where soft bodies drew
+    this frame or the last; k divides 16, so a block never straddles two tiles)."""
     for y in range(y0, y1):
         for x in range(x0, x1):
             t = ((y * k) // TILE) * TX + (x * k) // TILE
@@ -226,7 +226,7 @@ def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, 
                 for dy in range(k):
                     for dx in range(k):
                         z = ti.max(z, depth[ti.min(y * k + dy, H - 1) * W + ti.min(x * k + dx, W - 1)])
-                depth[W * H + y * Wl + x] = z
+                depth[at + y * Wk + x] = z
 
 
 @ti.kernel

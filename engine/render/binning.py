@@ -3,8 +3,9 @@
 After ``bin`` a tile's sprites lie contiguously in ``pairs[tile_start[t] : tile_start[t] +
 tile_count[t]]``, in slot order, as 16-float records (streamed by the splat instead of gathered
 by slot: one cache miss each): centre x, y, radius, depth | RGB, alpha | energy, tail x, y, OIT
-depth weight | kind (1 disc, −1 streak), additive, 1/soft-fade distance, 1/streak length². Tiles of both levels share one index space: level 0 (full
-resolution) tiles are [0, T0), level-1 (reduced buffer) tiles [T0, T0 + T1).
+depth weight | kind (1 disc, −1 streak), additive, 1/soft-fade distance, 1/streak length². Tiles of every level share one index space: level 0 (full
+resolution) tiles are [0, T0), level-1 (reduced buffer) tiles [T0, T0 + T1), level-2 (coarse
+buffer) tiles [T0 + T1, T0 + T1 + T2).
 
 No float atomics and nothing that depends on the thread count (PERF-NOTES: atomics are slow on
 the CPU and make sums depend on timing):
@@ -40,15 +41,17 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
     geom, slook, tail, softf = rec.spr_geom, rec.spr_look, rec.spr_tail, rec.spr_soft
 
     @ti.func
-    def tile_base(level, T0, TX0, TX1):
+    def tile_base(level, T0, T1, TX0, TX1, TX2):
         base, tx_n = 0, TX0
-        if level != 0:
+        if level == 1:
             base, tx_n = T0, TX1
+        elif level == 2:
+            base, tx_n = T0 + T1, TX2
         return base, tx_n
 
     @ti.kernel
-    def count(hist: ti.types.ndarray(dtype=ti.i32, ndim=2), T: ti.i32, T0: ti.i32, TX0: ti.i32,
-              TX1: ti.i32):
+    def count(hist: ti.types.ndarray(dtype=ti.i32, ndim=2), T: ti.i32, T0: ti.i32, T1: ti.i32,
+              TX0: ti.i32, TX1: ti.i32, TX2: ti.i32):
         ti.loop_config(block_dim=1)  # one chunk per task
         for c in range(chunks):
             for t in range(T):
@@ -56,7 +59,7 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
             for i in range(c * chunk, ti.min(cap, (c + 1) * chunk)):
                 if info[i][0] != 0:
                     b = tiles[i]
-                    base, tx_n = tile_base(info[i][2], T0, TX0, TX1)
+                    base, tx_n = tile_base(info[i][2], T0, T1, TX0, TX1, TX2)
                     for ty in range(b[1], b[3] + 1):
                         for tx in range(b[0], b[2] + 1):
                             t = base + ty * tx_n + tx
@@ -96,15 +99,15 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
     @ti.kernel
     def scatter(pairs: ti.types.ndarray(dtype=vec16, ndim=1),
                 hist: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                tile_start: ti.types.ndarray(dtype=ti.i32, ndim=1), T0: ti.i32, TX0: ti.i32,
-                TX1: ti.i32):
+                tile_start: ti.types.ndarray(dtype=ti.i32, ndim=1), T0: ti.i32, T1: ti.i32,
+                TX0: ti.i32, TX1: ti.i32, TX2: ti.i32):
         ti.loop_config(block_dim=1)
         for c in range(chunks):
             for i in range(c * chunk, ti.min(cap, (c + 1) * chunk)):
                 nf = info[i]
                 if nf[0] != 0:
                     b = tiles[i]
-                    base, tx_n = tile_base(nf[2], T0, TX0, TX1)
+                    base, tx_n = tile_base(nf[2], T0, T1, TX0, TX1, TX2)
                     g, lk, tl = geom[i], slook[i], tail[i]
                     # a streak's 1/L² (for projecting pixels on it); 0 for a disc
                     d2 = (tl[1] - g[0]) ** 2 + (tl[2] - g[1]) ** 2

@@ -14,7 +14,12 @@ Two schedules give the same image (each pixel takes its tile's sprites in slot o
 
 The reduced buffer (level 1, Cantlay 2007) is splatted first by the same schedules into its own
 accumulators; the full-resolution pass samples it through ``upsample.py`` (bilinear, bilateral at
-the edges of nearer surfaces).
+the edges of nearer surfaces). Big sprites (radius ≥ 4 of its texels) go to a coarse buffer
+(level 2) at half the reduced scale, splatted before it: each reduced texel adds the coarse sums
+under it (``co_quad``/``co_mix``, the same bilinear-or-bilateral rule) before it resolves, so the
+two levels are one layer — sums add, transmittances multiply, the OIT resolve is taken once — and
+a big sprite costs a quarter of the texels (explosion.toml at 1280×720: covered pixel–sprite
+pairs 1.96 M → 0.59 M, the splat 19–26 → 11–13 ms on a slow day of this 2-core machine).
 
 Tone map: exposure, the ACES filmic fit (Narkowicz 2015), sRGB by a 16,384-entry table of 8-bit
 values (``pow`` once per entry at build, not three times per pixel), packed as one u32 RGBA per
@@ -27,7 +32,7 @@ import taichi as ti
 
 from .splat import add_sprite, capsule_point, disc_weight, record_box
 from .sprites import TILE
-from .upsample import ND_I1, ND_V4, lo_edge, lo_near, lo_rows, lo_sample, tile_is_edge
+from .upsample import ND_I1, ND_V4, co_mix, co_quad, lo_edge, lo_near, lo_rows, lo_sample, tile_is_edge
 
 LUT_SIZE = 16384
 LUT_MAX = 8.0
@@ -212,46 +217,109 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
             B = accB[k]
         return layer(accA[k], B, shading)
 
+    @ti.func
+    def with_coarse(A, B, x, y, z, accA: ti.template(), accB: ti.template(), dep: ti.template(), LC,
+                    Wc, Hc):
+        """A reduced texel's sums (A, B) with the coarse level's under it added (``co_quad``):
+        light and OIT sums add, transmittances multiply — one layer, as if every sprite had been
+        drawn at the reduced level (not the coarse layer composited behind it: a big near puff
+        is not put behind small far ones)."""
+        k, w = co_quad(x, y, z, dep, LC, Wc, Hc)
+        A2 = co_mix(accA, k, w)
+        A = ti.Vector([A[0] + A2[0], A[1] + A2[1], A[2] + A2[2], A[3] * A2[3]])
+        if ti.static(uses_alpha):
+            B = B + co_mix(accB, k, w)
+        return A, B
+
     @ti.kernel
     def splat_tiles(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4, accB: ND_V4,
-                    dep: ND_F, touched_lo: ND_I1, T0: ti.i32, TX: ti.i32, W: ti.i32, H: ti.i32,
-                    T1: ti.i32, TXl: ti.i32, Wl: ti.i32, Hl: ti.i32, shading: ti.f32):
-        """Per tile of both levels (the CPU's schedule): clear and splat the tile's sprites into
-        the accumulators. A reduced-level tile then resolves each texel to its layer (RGB, T) in
-        place; one emptied since the last frame is reset to the empty layer, so the upsample may
-        read any texel without asking whether its tile was drawn."""
+                    dep: ND_F, touched_lo: ND_I1, touched_co: ND_I1, t_lo: ti.i32, t_hi: ti.i32,
+                    T0: ti.i32, TX: ti.i32, W: ti.i32, H: ti.i32, T1: ti.i32, TXl: ti.i32, Wl: ti.i32,
+                    Hl: ti.i32, TXc: ti.i32, Wc: ti.i32, Hc: ti.i32, shading: ti.f32):
+        """Per tile (the CPU's schedule), the tiles [t_lo, t_hi) of the index space (full level,
+        then reduced, then coarse): clear and splat the tile's sprites into the accumulators. The
+        renderer launches the coarse tiles first, then the others: a reduced-level tile then
+        adds the coarse level's sums under it (``with_coarse``) and resolves each texel to its
+        layer (RGB, T) in place. A reduced or coarse tile emptied since the last frame is reset
+        (to the empty layer, or the empty sums), so the upsamples may read any texel without
+        asking whether its tile was drawn."""
         ti.loop_config(block_dim=1)
-        for t in range(T0 + T1):
-            lvl = t >= T0
-            tt, tx_n, Wc, Hc, base = t, TX, W, H, 0
-            if lvl:
-                tt, tx_n, Wc, Hc, base = t - T0, TXl, Wl, Hl, W * H
+        LO, LC = W * H, W * H + Wl * Hl
+        for t in range(t_lo, t_hi):
+            lvl, tt, tx_n, Wk, Hk, base = 0, t, TX, W, H, 0
+            if t >= T0 + T1:
+                lvl, tt, tx_n, Wk, Hk, base = 2, t - T0 - T1, TXc, Wc, Hc, LC
+            elif t >= T0:
+                lvl, tt, tx_n, Wk, Hk, base = 1, t - T0, TXl, Wl, Hl, LO
             n = tile_count[t]
             px0, py0 = (tt % tx_n) * TILE, (tt // tx_n) * TILE
-            px1, py1 = ti.min(Wc - 1, px0 + TILE - 1), ti.min(Hc - 1, py0 + TILE - 1)
+            px1, py1 = ti.min(Wk - 1, px0 + TILE - 1), ti.min(Hk - 1, py0 + TILE - 1)
             if n > 0:
-                splat_tile(t, px0, py0, px1, py1, pairs, tile_count, tile_start, accA, accB, dep, base, Wc)
-            if lvl:
-                if n > 0 or touched_lo[tt] != 0:
+                splat_tile(t, px0, py0, px1, py1, pairs, tile_count, tile_start, accA, accB, dep, base, Wk)
+            if lvl == 2:
+                if n == 0 and touched_co[tt] != 0:
                     for y in range(py0, py1 + 1):
-                        for k in range(base + y * Wc + px0, base + y * Wc + px1 + 1):
+                        for k in range(base + y * Wk + px0, base + y * Wk + px1 + 1):
+                            accA[k] = EMPTY_LAYER
+                            if ti.static(uses_alpha):
+                                accB[k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+                touched_co[tt] = ti.select(n > 0, 1, 0)
+            elif lvl == 1:
+                near = lo_near(px0, py0, px1, py1, touched_co, Wc, Hc, TXc, 0.5)
+                if n > 0 or near != 0 or touched_lo[tt] != 0:
+                    for y in range(py0, py1 + 1):
+                        for x in range(px0, px1 + 1):
+                            k = base + y * Wk + x
                             v = EMPTY_LAYER
-                            if n > 0:
-                                v = acc_layer(accA, accB, k, shading)
+                            if n > 0 or near != 0:
+                                A, B = EMPTY_LAYER, ti.Vector([0.0, 0.0, 0.0, 0.0])
+                                if n > 0:
+                                    A = accA[k]
+                                    if ti.static(uses_alpha):
+                                        B = accB[k]
+                                if near != 0:
+                                    A, B = with_coarse(A, B, x, y, dep[k], accA, accB, dep, LC, Wc, Hc)
+                                v = layer(A, B, shading)
                             accA[k] = v
-                touched_lo[tt] = ti.select(n > 0, 1, 0)
+                touched_lo[tt] = ti.select(n > 0 or near != 0, 1, 0)
+
+    @ti.kernel
+    def splat_pixels_co(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,
+                        accB: ND_V4, dep: ND_F, touched_co: ND_I1, T01: ti.i32, LC: ti.i32,
+                        T2: ti.i32, TXc: ti.i32, Wc: ti.i32, Hc: ti.i32):
+        """The coarse level per texel (the GPU's schedule): its sums, as ``splat_tiles`` leaves
+        them (T01 = T0 + T1: its first tile)."""
+        for t in range(T2):
+            touched_co[t] = ti.select(tile_count[T01 + t] > 0, 1, 0)
+        for py, px in ti.ndrange(Hc, Wc):
+            k = LC + py * Wc + px
+            A, B = splat_pixel(T01 + (py // TILE) * TXc + px // TILE, px, py, pairs, tile_count,
+                               tile_start, dep[k])
+            accA[k] = A
+            if ti.static(uses_alpha):
+                accB[k] = B
 
     @ti.kernel
     def splat_pixels_lo(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,
-                        dep: ND_F, touched_lo: ND_I1, T0: ti.i32, W: ti.i32, H: ti.i32, T1: ti.i32,
-                        TXl: ti.i32, Wl: ti.i32, Hl: ti.i32, shading: ti.f32):
-        """The reduced level per texel (the GPU's schedule; the same layer as ``splat_tiles``)."""
+                        accB: ND_V4, dep: ND_F, touched_lo: ND_I1, touched_co: ND_I1, T0: ti.i32,
+                        W: ti.i32, H: ti.i32, T1: ti.i32, TXl: ti.i32, Wl: ti.i32, Hl: ti.i32,
+                        TXc: ti.i32, Wc: ti.i32, Hc: ti.i32, shading: ti.f32):
+        """The reduced level per texel (the GPU's schedule, after ``splat_pixels_co``; the same
+        layer as ``splat_tiles``)."""
+        LO, LC = W * H, W * H + Wl * Hl
         for t in range(T1):
-            touched_lo[t] = ti.select(tile_count[T0 + t] > 0, 1, 0)
+            tx, ty = t % TXl, t // TXl
+            near = lo_near(tx * TILE, ty * TILE, ti.min(Wl - 1, tx * TILE + TILE - 1),
+                           ti.min(Hl - 1, ty * TILE + TILE - 1), touched_co, Wc, Hc, TXc, 0.5)
+            touched_lo[t] = ti.select(tile_count[T0 + t] > 0 or near != 0, 1, 0)
         for py, px in ti.ndrange(Hl, Wl):
-            k = W * H + py * Wl + px
-            A, B = splat_pixel(T0 + (py // TILE) * TXl + px // TILE, px, py, pairs, tile_count,
-                               tile_start, dep[k])
+            k = LO + py * Wl + px
+            tx, ty = px // TILE, py // TILE
+            A, B = splat_pixel(T0 + ty * TXl + tx, px, py, pairs, tile_count, tile_start, dep[k])
+            # (the tile's test, as the tile schedule makes it: the same sums added where it does)
+            if lo_near(tx * TILE, ty * TILE, ti.min(Wl - 1, tx * TILE + TILE - 1),
+                       ti.min(Hl - 1, ty * TILE + TILE - 1), touched_co, Wc, Hc, TXc, 0.5) != 0:
+                A, B = with_coarse(A, B, px, py, dep[k], accA, accB, dep, LC, Wc, Hc)
             accA[k] = layer(A, B, shading)
 
     @ti.func
@@ -380,6 +448,6 @@ def build_composite_kernels(uses_add: bool, uses_alpha: bool):
             for k in range(y * W + x0, y * W + x1):
                 bg_packed[k] = finish(bgc[k], EMPTY_LAYER, EMPTY_LAYER, exposure, mode)
 
-    return dict(splat_tiles=splat_tiles, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
+    return dict(splat_tiles=splat_tiles, splat_pixels_co=splat_pixels_co, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
                 composite_tiles=composite_tiles, composite_pixels=composite_pixels,
                 pack_background=pack_background)

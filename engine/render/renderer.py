@@ -25,7 +25,7 @@ import taichi as ti
 from .background import build_background_kernel, copy_background, downsample_depth
 from .binning import build_binning_kernels, chunks_for
 from .composite import build_composite_kernels
-from .resolution import particle_scale
+from .resolution import CO_MIN_TEXELS, LO_MIN_TEXELS, particle_scale
 from .sprites import TILE, Look, SpriteRecords, build_sprite_kernel
 from .targets import FrameTargets, packed_view
 
@@ -175,14 +175,14 @@ class Renderer:
             self.mesh.update()
             self.mesh.draw(t, cam)
             bgc, dep = t.fbg, t.fdep
-        if t.has_lo:  # the reduced depth where the full one changed: the redrawn rectangle, the bodies' tiles
-            k = round(1 / t.scale)
+        if t.has_lo:  # the reduced depths where the full one changed: the redrawn rectangle, the bodies' tiles
             prev = t.dirty_prev if self.mesh is not None else t.dirty
-            if rect is not None:
-                lo = (rect[0] // k, rect[1] // k, min(t.Wl, -(-rect[2] // k)), min(t.Hl, -(-rect[3] // k)))
-                downsample_depth(dep, W, H, t.Wl, t.Hl, k, *lo, t.dirty, prev, t.TX, 0)
-            if self.mesh is not None:
-                downsample_depth(dep, W, H, t.Wl, t.Hl, k, 0, 0, t.Wl, t.Hl, t.dirty, prev, t.TX, 1)
+            for k, at, Wk, Hk in ((round(1 / t.scale), t.LO, t.Wl, t.Hl), (round(2 / t.scale), t.LC, t.Wc, t.Hc)):
+                if rect is not None:
+                    lo = (rect[0] // k, rect[1] // k, min(Wk, -(-rect[2] // k)), min(Hk, -(-rect[3] // k)))
+                    downsample_depth(dep, W, H, at, Wk, k, *lo, t.dirty, prev, t.TX, 0)
+                if self.mesh is not None:
+                    downsample_depth(dep, W, H, at, Wk, k, 0, 0, Wk, Hk, t.dirty, prev, t.TX, 1)
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:
@@ -202,13 +202,22 @@ class Renderer:
                                         dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)
         return image
 
+    def splat_tiles(self, t: FrameTargets, dep, t_lo: int, t_hi: int) -> None:
+        """The per-tile splat of the tiles [t_lo, t_hi) (engine.render.composite.splat_tiles)."""
+        if t_hi > t_lo:
+            self._k["splat_tiles"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_lo,
+                                   t.touched_co, t_lo, t_hi, t.T0, t.TX, t.W, t.H, t.T1, t.TXl, t.Wl, t.Hl,
+                                   t.TXc, t.Wc, t.Hc, self.shading)
+
     def _splat(self, t: FrameTargets, cam, dep, blend: float = 1.0) -> int:
         """Sprites, binning, and the splat (per tile: both levels; per pixel: the reduced level,
         the full one is splatted in the composite); returns whether the reduced level is used."""
         W, H = t.W, t.H
-        lo_min = 2.0 / t.scale if t.has_lo else 1e30  # a reduced sprite is at least 2 texels wide
-        self._sprites(*cam, W, H, t.scale, lo_min, float(blend))
-        self._count(t.hist, t.T, t.T0, t.TX, t.TXl)
+        # a reduced sprite's radius is at least LO_MIN_TEXELS texels, a coarse one's CO_MIN_TEXELS
+        lo_min = LO_MIN_TEXELS / t.scale if t.has_lo else 1e30
+        co_min = CO_MIN_TEXELS / (0.5 * t.scale) if t.has_lo else 1e30
+        self._sprites(*cam, W, H, t.scale, lo_min, co_min, float(blend))
+        self._count(t.hist, t.T, t.T0, t.T1, t.TX, t.TXl, t.TXc)
         self._offsets(t.hist, t.tile_count, t.block_sum, t.T, t.NB)
         total = int(self._starts(t.tile_count, t.tile_start, t.block_sum, t.T, t.NB))
         if total > t.pair_capacity:  # an ndarray: growing it recompiles nothing
@@ -219,12 +228,16 @@ class Renderer:
             # ``touched_lo`` is 0): every tile count is 0, so no accumulator is read — no
             # scatter, splat or reduced rows (an empty frame's fixed cost)
             return 0
-        self._scatter(t.pairs, t.hist, t.tile_start, t.T0, t.TX, t.TXl)
+        self._scatter(t.pairs, t.hist, t.tile_start, t.T0, t.T1, t.TX, t.TXl, t.TXc)
         if self.schedule == "tiles":
-            self._k["splat_tiles"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep,
-                                   t.touched_lo, t.T0, t.TX, W, H, t.T1, t.TXl, t.Wl, t.Hl, self.shading)
+            self.splat_tiles(t, dep, t.T0 + t.T1, t.T)  # the coarse level first: the reduced one reads it
+            self.splat_tiles(t, dep, 0, t.T0 + t.T1)
         elif t.has_lo:
-            self._k["splat_pixels_lo"](t.pairs, t.tile_count, t.tile_start, t.accA, dep, t.touched_lo,
-                                       t.T0, W, H, t.T1, t.TXl, t.Wl, t.Hl, self.shading)
-        t.lo_clear = total == 0  # (both splats set each touched_lo to whether its tile holds sprites)
+            self._k["splat_pixels_co"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_co,
+                                       t.T0 + t.T1, t.LC, t.T2, t.TXc, t.Wc, t.Hc)
+            self._k["splat_pixels_lo"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_lo,
+                                       t.touched_co, t.T0, W, H, t.T1, t.TXl, t.Wl, t.Hl, t.TXc, t.Wc, t.Hc,
+                                       self.shading)
+        # (every splat sets each touched_lo and touched_co to whether its tile was drawn)
+        t.lo_clear = total == 0
         return int(t.has_lo)

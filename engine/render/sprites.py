@@ -8,7 +8,8 @@ world units, so a far particle is smaller. ``build_sprite_kernel`` turns every l
 * ``spr_tail``  (cap,) vec4 f32: energy (sub-pixel light kept), streak tail x, y (px), OIT depth weight
 * ``spr_info``  (cap,) vec4 i32: kind (0 not drawn, 1 a disc, −1 a streak: a capsule from the
   centre to the tail),
-  additive (0/1), level (0 full resolution, 1 the reduced off-screen buffer), unused
+  additive (0/1), level (0 full resolution, 1 the reduced off-screen buffer, 2 the coarse one),
+  unused
 * ``spr_soft``  (cap,) f32: 1 / the soft-particle fade distance (1/m); the fade distance is half
   the sprite's world size
 * ``spr_tiles`` (cap,) vec4 i32: the tile rectangle it covers, x0, y0, x1, y1 inclusive, in its
@@ -17,7 +18,10 @@ world units, so a far particle is smaller. ``build_sprite_kernel`` turns every l
 Levels (Cantlay, *GPU Gems 3* ch. 23, "High-Speed, Off-Screen Particles"): large soft sprites
 fill pixels, so a sprite whose full-resolution radius is at least ``lo_min_rad`` pixels is drawn
 into a buffer at ``lo_scale`` of the resolution (½ or ¼) and composited with a depth-aware
-upsample; small sprites (sparks and their thin streaks) stay at full resolution.
+upsample; small sprites (sparks and their thin streaks) stay at full resolution. One of at least
+``co_min_rad`` pixels goes to a coarse buffer at half that scale (a big smoke puff covers ~16
+times the texels of its smallest neighbours at the reduced level; at the coarse one a quarter of
+them: engine.render.composite merges the coarse level into the reduced one).
 """
 # (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
 
@@ -115,11 +119,12 @@ class SpriteRecords:
 
 
 def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
-    """``sprites(o, f, r, u, th, W, H, lo_scale, lo_min_rad, blend)``: every slot of the pool → its
-    sprite record. (o, f, r, u) is the camera's position and basis, th the tangent of half the
-    vertical field of view, W×H the image; sprites of full-resolution radius ≥ ``lo_min_rad`` px go
-    to the level-1 buffer of ``lo_scale``·W × ``lo_scale``·H (``lo_scale`` 1: everything at level
-    0). A pool that keeps ``particle_prev_pos`` (``interpolate``) is drawn at
+    """``sprites(o, f, r, u, th, W, H, lo_scale, lo_min_rad, co_min_rad, blend)``: every slot of the
+    pool → its sprite record. (o, f, r, u) is the camera's position and basis, th the tangent of
+    half the vertical field of view, W×H the image; sprites of full-resolution radius ≥
+    ``lo_min_rad`` px go to the level-1 buffer of ``lo_scale``·W × ``lo_scale``·H (``lo_scale`` 1:
+    everything at level 0), those of radius ≥ ``co_min_rad`` px to the level-2 buffer at half
+    that scale. A pool that keeps ``particle_prev_pos`` (``interpolate``) is drawn at
     prev + blend·(pos − prev) (Fiedler, "Fix Your Timestep!": the fixed-step clock's alpha), a
     particle without a previous position (NaN: born since) where it is; otherwise blend is unused."""
     S = state
@@ -137,7 +142,7 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
 
     @ti.kernel
     def sprites(o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32, H: ti.i32,
-                lo_scale: ti.f32, lo_min_rad: ti.f32, blend: ti.f32):
+                lo_scale: ti.f32, lo_min_rad: ti.f32, co_min_rad: ti.f32, blend: ti.f32):
         for i in range(cap):
             nsub = 0
             if alive[i] != 0 and age[i] >= 0.0:  # (negative age: born later in this step)
@@ -162,8 +167,10 @@ def build_sprite_kernel(state, look: Look, rec: SpriteRecords):
                     s = 1.0
                     if lo_scale < 1.0 and rad >= lo_min_rad:  # (big flame streaks too)
                         level, s = 1, lo_scale
+                        if rad >= co_min_rad:
+                            level, s = 2, 0.5 * lo_scale
                     Wl, Hl = W, H
-                    if level == 1:
+                    if level != 0:
                         Wl = ti.max(1, ti.cast(ti.ceil(W * s), ti.i32))
                         Hl = ti.max(1, ti.cast(ti.ceil(H * s), ti.i32))
                     cx = (dpos.dot(r) * scale + 0.5 * W) * s

@@ -4,11 +4,14 @@ arguments, so a new render size allocates arrays and compiles nothing (fields pa
 
 Per pixel (H·W,), flat in row-major order: ``bgc`` vec4 (background RGB, coverage 0) and ``depth`` f32 (m) — kept while the
 camera, colliders and size stay; ``bg_packed`` u32, the background tone-mapped (what an untouched
-tile copies). The splat arrays hold the full level's W·H pixels and then the reduced level's
-Wl·Hl texels (Hl, Wl = ceil(scale · (H, W))): ``depth`` (the reduced part: the farthest depth under
+tile copies). The splat arrays hold the full level's W·H pixels, then the reduced level's
+Wl·Hl texels (Hl, Wl = ceil(scale · (H, W))), then the coarse level's Wc·Hc texels (at half the
+reduced scale; engine.render.composite): ``depth`` (the reduced parts: the farthest depth under
 each texel), ``accA``/``accB`` vec4 splat accumulators (engine.render.splat), written only in tiles
-that hold sprites (the reduced part ends as the layer (RGB, T)); ``touched_lo`` (T1,) reduced
-tiles holding sprites. Tiles: ``hist``
+that hold sprites (the reduced part ends as the layer (RGB, T), the coarse one keeps its sums);
+``touched_lo`` (T1,) reduced tiles drawn (their own sprites or the coarse level's under them),
+``touched_co`` (T2,) coarse tiles holding sprites. Tiles (full, reduced, coarse: T0 + T1 + T2 =
+T in one index space): ``hist``
 (chunks, T) i32, ``tile_count``/``tile_start`` (T,), ``block_sum``, ``pairs`` (grows). Soft bodies:
 ``vis`` i64 visibility buffer, ``lines`` ivec4 line sums, ``fbg``/``fdep`` the frame's background
 with the bodies drawn in, ``dirty``/``dirty_prev`` (T0,) tiles the bodies touch. ``edges`` (T0,) the composite's cache of
@@ -47,10 +50,16 @@ class FrameTargets:
         self.Wl, self.Hl = reduced_size(W, H, scale) if self.has_lo else (1, 1)
         self.TXl, self.TYl = tiles_for(self.Wl, self.Hl) if self.has_lo else (1, 1)
         self.T1 = self.TXl * self.TYl if self.has_lo else 0
-        self.T = self.T0 + self.T1
+        # the coarse level, with the reduced one: half its scale (engine.render.composite)
+        self.Wc, self.Hc = reduced_size(W, H, 0.5 * scale) if self.has_lo else (1, 1)
+        self.TXc, self.TYc = tiles_for(self.Wc, self.Hc) if self.has_lo else (1, 1)
+        self.T2 = self.TXc * self.TYc if self.has_lo else 0
+        self.T = self.T0 + self.T1 + self.T2
         self.NB = (self.T + SCAN_BLOCK - 1) // SCAN_BLOCK
         px = H * W  # pixel arrays are flat: (H·W,), indexed y·W + x
-        both = px + self.Wl * self.Hl  # splat arrays: the full level, then the reduced one
+        self.LO = px  # where the reduced level starts in the splat arrays, and the coarse one
+        self.LC = px + self.Wl * self.Hl
+        both = self.LC + self.Wc * self.Hc  # splat arrays: every level (1×1 ones unused)
         self.bgc = ti.ndarray(vec4, shape=px)
         self.depth = ti.ndarray(ti.f32, shape=both)
         self.bg_packed = ti.ndarray(ti.u32, shape=px)
@@ -60,7 +69,10 @@ class FrameTargets:
         self.lo_rows = ti.ndarray(vec4, shape=self.Hl * W if self.has_lo else 1)
         self.touched_lo = ti.ndarray(ti.i32, shape=max(1, self.T1))
         self.touched_lo.fill(0)
-        self.lo_clear = True  # every touched_lo is 0 (the renderer's empty frames skip the splat)
+        self.touched_co = ti.ndarray(ti.i32, shape=max(1, self.T2))
+        self.touched_co.fill(0)
+        # every touched_lo and touched_co is 0 (the renderer's empty frames skip the splat)
+        self.lo_clear = True
         self.hist = ti.ndarray(ti.i32, shape=(chunks, self.T))
         self.tile_count = ti.ndarray(ti.i32, shape=self.T)
         self.tile_count.fill(0)  # (a scene without particles never bins: every tile stays empty)

@@ -8,7 +8,9 @@ a tile needs the bilateral weights anywhere (``tile_is_edge``) depends on depths
 composite keeps it per tile (engine.render.composite).
 
 The reduced level is stored after the full one in the same flat arrays: texel (x, y) at
-LO + y·Wl + x, LO = W·H.
+LO + y·Wl + x, LO = W·H; the coarse level (half the reduced scale) after it, at LC + y·Wc + x.
+The coarse level reaches the picture through the reduced one: ``co_sample`` upsamples its sums
+(not a resolved layer) to a reduced texel, the same bilinear or bilateral rule one level down.
 """
 # (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
 
@@ -68,6 +70,29 @@ def lo_sample(px, py, z, lo: ti.template(), rows: ti.template(), depth_lo: ti.te
             out = (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa]
                    + w11 * lo[rb + xb]) / (w00 + w10 + w01 + w11)
     return out
+
+
+@ti.func
+def co_quad(x, y, z, depth: ti.template(), LC, Wc, Hc):
+    """Where reduced texel (x, y) of depth z reads the coarse level: its four nearest coarse
+    texels (indices) and their weights — bilinear, or where their depths differ by more than 10 %
+    of z (``quad_is_edge``) bilateral as in ``lo_sample``, normalised."""
+    ja, jb, xa, xb, fx, fy = lo_quad(x, y, 0.5, Wc, Hc)
+    ra, rb = LC + ja * Wc, LC + jb * Wc
+    k = ti.Vector([ra + xa, ra + xb, rb + xa, rb + xb])
+    w = ti.Vector([(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy])
+    zq = ti.Vector([depth[k[0]], depth[k[1]], depth[k[2]], depth[k[3]]])
+    if quad_is_edge(zq[0], zq[1], zq[2], zq[3], z):
+        w = w / (1e-3 + ti.abs(zq - z) / z)
+        w = w / w.sum()
+    return k, w
+
+
+@ti.func
+def co_mix(acc: ti.template(), k, w):
+    """The coarse level's sums ``acc`` (accA or accB) at the quad (k, w) of ``co_quad``: what a
+    sprite drawn there adds, read as if it had been drawn at the reduced level."""
+    return w[0] * acc[k[0]] + w[1] * acc[k[1]] + w[2] * acc[k[2]] + w[3] * acc[k[3]]
 
 
 @ti.func

@@ -1,6 +1,6 @@
 """The splat's cost per covered pixel–sprite pair, against a plain memory-bound loop over the same pairs.
 
-A *covered pair* is a pixel of a tile (either level) and a sprite of that tile's list whose disc (or
+A *covered pair* is a pixel of a tile (any level) and a sprite of that tile's list whose disc (or
 capsule, for a streak) contains the pixel's centre: the work the splat cannot avoid. The reference
 is the cheapest loop that touches the same memory in the same order: per tile (one thread each, as
 the splat), for each covered pair in slot order, a load and a store of that pixel's vec4
@@ -43,12 +43,12 @@ def covered_pairs(t, total: int):
     rec = t.pairs.to_numpy()[:total].astype(np.float32)
     counts = t.tile_count.to_numpy()[: t.T]
     tile = np.repeat(np.arange(t.T), counts)
-    lvl = tile >= t.T0
-    tt = np.where(lvl, tile - t.T0, tile)
-    txn = np.where(lvl, t.TXl, t.TX)
-    Wc = np.where(lvl, t.Wl, t.W)
-    Hc = np.where(lvl, t.Hl, t.H)
-    base = np.where(lvl, t.W * t.H, 0)
+    lvl = (tile >= t.T0).astype(np.int64) + (tile >= t.T0 + t.T1)  # full, reduced, coarse
+    tt = tile - np.choose(lvl, [0, t.T0, t.T0 + t.T1])
+    txn = np.choose(lvl, [t.TX, t.TXl, t.TXc])
+    Wc = np.choose(lvl, [t.W, t.Wl, t.Wc])
+    Hc = np.choose(lvl, [t.H, t.Hl, t.Hc])
+    base = np.choose(lvl, [0, t.LO, t.LC])
     px0 = (tt % txn) * TILE
     py0 = (tt // txn) * TILE
     idx_all, per_pair = [], np.zeros(total, np.int64)
@@ -93,11 +93,10 @@ def measure(renderer, t, dep, rounds: int = 7):
     start.from_numpy(start_np)
     ref = _ref_kernel()
     scratch = ti.ndarray(ti.types.vector(4, ti.f32), shape=t.accA.shape[0])
-    W, H = t.W, t.H
 
-    def splat():
-        R._k["splat_tiles"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_lo,
-                            t.T0, t.TX, W, H, t.T1, t.TXl, t.Wl, t.Hl, R.shading)
+    def splat():  # (as the renderer launches it: the coarse level first)
+        R.splat_tiles(t, dep, t.T0 + t.T1, t.T)
+        R.splat_tiles(t, dep, 0, t.T0 + t.T1)
 
     def plain():
         ref(idx, start, scratch, t.T)
