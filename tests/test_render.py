@@ -77,6 +77,18 @@ def _compiled(renderer):
     return sum(len(k._primal.compiled_kernels) for k in kernels)
 
 
+def test_a_second_scene_compiles_no_composite_kernel():
+    """The splat and composite kernels take every array as an argument: built once per Taichi
+    program and blend modes, a second scene (a rebuilt one, another level) shares them."""
+    a = _scene("configs/sparks.toml", frames=3, size=(96, 54))
+    a.render()
+    before = sum(len(k._primal.compiled_kernels) for k in a.renderer._k.values())
+    b = _scene("configs/sparks.toml", frames=3, size=(96, 54))
+    b.render()
+    assert b.renderer._k is a.renderer._k
+    assert sum(len(k._primal.compiled_kernels) for k in b.renderer._k.values()) == before
+
+
 def test_new_sizes_cameras_and_overlays_compile_nothing():
     s = _scene("configs/sparks.toml", frames=5, size=(128, 72))
     r = s.renderer

@@ -30,6 +30,7 @@ pixel (bytes R, G, B, A in memory).
 import numpy as np
 import taichi as ti
 
+from .. import runtime
 from .splat import add_sprite, capsule_point, disc_weight, record_box
 from .sprites import TILE
 from .upsample import ND_I1, ND_V4, co_mix, co_quad, lo_edge, lo_near, lo_rows, lo_sample, tile_is_edge
@@ -54,7 +55,26 @@ def tonemap_table(n: int = LUT_SIZE, x_max: float = LUT_MAX) -> np.ndarray:
     return np.minimum(255, np.floor(s * 255.0 + 0.5)).astype(np.int32)
 
 
+_BUILT = {}  # (uses_add, uses_alpha) -> (Taichi program, the kernels built in it)
+
+
 def build_composite_kernels(uses_add: bool, uses_alpha: bool):
+    """The splat, composite and tone-map kernels for scenes with these blend modes: built once
+    per Taichi program and shared by every renderer (their arrays are ndarray arguments and the
+    tone-map table the only field, so a rebuilt or second scene compiles none of them again:
+    composite_tiles alone was ~4–5 s of a cold build; ``engine.runtime.reset`` forgets them)."""
+    from taichi.lang import impl
+
+    key, prog = (bool(uses_add), bool(uses_alpha)), impl.get_runtime().prog
+    if key not in _BUILT or _BUILT[key][0] is not prog:  # (a host may reset Taichi itself)
+        _BUILT[key] = (prog, _build(*key))
+    return _BUILT[key][1]
+
+
+runtime.on_reset(_BUILT.clear)
+
+
+def _build(uses_add: bool, uses_alpha: bool):
     lut = ti.field(ti.i32, shape=LUT_SIZE)
     lut.from_numpy(tonemap_table())
 
