@@ -201,6 +201,7 @@ def test_grains_do_not_overlap():
     assert d[:, 1].min() >= 2 * r - 0.1 * r, d[:, 1].min() / (2 * r)
 
 
+@pytest.mark.slow  # (default run kept under 5 minutes cold: CI runs it with the slow tests)
 def test_grains_between_other_emitters_interact_over_their_own_ring_only():
     """The interactions' per-slot loops run over the interacting emitters' rings (a game's pool
     has spare slots past them): grains poured after a plain emitter and before another still
@@ -292,6 +293,7 @@ def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
     assert I.stats()["unlisted"] > 0 and (I.lists.count.to_numpy() == -1).any()
 
 
+@pytest.mark.slow  # (default run kept under 5 minutes cold; the lists' test above runs by default)
 def test_grains_wide_skin_lists_hold_every_neighbour_too():
     """Grains alone take the wide skin (GRAIN_SKIN: fewer relistings in a pour); their lists hold
     every neighbour of the walk before each use all the same, as they fall and pile."""

@@ -232,7 +232,8 @@ def test_moving_emitter_follows_its_path_and_hands_down_its_velocity():
     np.testing.assert_allclose(p[:, 0], 2.0 * 0.5, atol=1e-3)
 
 
-@pytest.mark.parametrize("impacts", [pytest.param("projected", marks=pytest.mark.slow), "located"])
+@pytest.mark.slow  # (both: the default run kept under 5 minutes cold; CI runs them with the slow tests)
+@pytest.mark.parametrize("impacts", ["projected", "located"])
 def test_fixed_steps_fused_into_runs_give_the_same_bytes_as_step_by_step(monkeypatch, impacts):
     """Where nothing is due between fixed steps (no births, still colliders, no sub-emitters)
     they run in one launch: the same particles, bit for bit, and fewer launches. (With located

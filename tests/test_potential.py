@@ -239,6 +239,7 @@ def test_non_finite_gradient_names_the_potential():
     assert "\n" not in str(e.value)
 
 
+@pytest.mark.slow  # (default run kept under 5 minutes cold: CI runs it with the slow tests)
 def test_potentials_carry_over_a_rebuild_and_go_with_their_emitters():
     s = scene(("rock", (0.0, 2.0, 0.0), 1), ("mist", (1.0, 2.0, 0.0), 1))
     s.add_potential(terrain, [9.81], emitters="rock", name="ground")

@@ -142,6 +142,7 @@ def test_hinge_limit_is_held():
     assert math.degrees(max(worst)) >= 29.0  # it reached the limit
 
 
+@pytest.mark.slow  # (default run kept under 5 minutes cold: CI runs it with the slow tests)
 def test_a_stack_of_boxes_stands_still():
     boxes = [{"name": f"b{k}", "shape": "box", "half_extents": [0.25, 0.25, 0.25],
               "position": [0.0, 0.25 + 0.5 * k, 0.0], "friction": 0.6} for k in range(5)]
