@@ -22,25 +22,33 @@ from .splitting import KICK, Splitting
 from .steppers import coefficients, lincomb, scaled_error
 
 
+@ti.func
+def rk_stage_node(x: ti.template(), v: ti.template(), a: ti.template(), vs: ti.template(), yx: ti.template(),
+                  yv: ti.template(), i, hh, coef: ti.template(), final: ti.template()):
+    """Element i's (x, v) + h Σ_m coef_m (V_m, A_m) over the stages so far (m < len(coef),
+    V_0 = v; hh = h in the fields' dtype): stage j = len(coef) into yx, yv and vs[j]; with
+    ``final`` (coef = b) the step's result into x, v. Shared by the staged kernels and the soft
+    bodies' fused frame (engine.springs.fused)."""
+    j = ti.static(len(coef))
+    kx, kv = [v[i]] * j, [a[0, i]] * j
+    for m in ti.static(range(1, j)):
+        kx[m], kv[m] = vs[m, i], a[m, i]
+    xn = lincomb(x[i], hh, coef, kx, x.dtype)
+    vn = lincomb(v[i], hh, coef, kv, x.dtype)
+    if ti.static(final):
+        x[i], v[i] = xn, vn
+    else:
+        yx[i], yv[i] = xn, vn
+        vs[j, i] = vn
+
+
 @ti.kernel
 def _rk_lincomb(x: ti.template(), v: ti.template(), a: ti.template(), vs: ti.template(),
                 yx: ti.template(), yv: ti.template(), n: ti.i32, h: ti.f64, coef: ti.template(),
                 final: ti.template()):
-    """(x, v) + h Σ_m coef_m (V_m, A_m) over the stages so far (m < len(coef), V_0 = v): stage
-    j = len(coef) into yx, yv and vs[j]; with ``final`` (coef = b) the step's result into x, v."""
-    j = ti.static(len(coef))
+    """:func:`rk_stage_node` over the n elements."""
     for i in range(n):
-        hh = ti.cast(h, x.dtype)
-        kx, kv = [v[i]] * j, [a[0, i]] * j
-        for m in ti.static(range(1, j)):
-            kx[m], kv[m] = vs[m, i], a[m, i]
-        xn = lincomb(x[i], hh, coef, kx, x.dtype)
-        vn = lincomb(v[i], hh, coef, kv, x.dtype)
-        if ti.static(final):
-            x[i], v[i] = xn, vn
-        else:
-            yx[i], yv[i] = xn, vn
-            vs[j, i] = vn
+        rk_stage_node(x, v, a, vs, yx, yv, i, ti.cast(h, x.dtype), coef, final)
 
 
 @ti.func

@@ -2,7 +2,8 @@
 
 Per substep the network needs: pin drive, a copy of the step's start (for locating impacts), the
 step itself (an XPBD step — predict, λ = 0, ``iterations`` Gauss–Seidel sweeps of every colour,
-velocity update — or a splitting scheme's gather-accelerations and kick–drifts) and the finalize
+velocity update —, a splitting scheme's gather-accelerations and kick–drifts, or an explicit
+Runge–Kutta tableau's stages: each a per-node linear combination, then a gather) and the finalize
 (pins snapped, impacts located, contacts held). Launched one by one that is 4–16 launches a
 substep, each of 1–12 offloaded tasks; on the CPU backend every launch costs tens of µs of Python
 and every task a thread-pool wake-up, which for a 28 × 28 cloth or a 31-node chain is far more
@@ -30,7 +31,7 @@ one; the GPU keeps the launch-by-launch path, whose colour loops are parallel).
 """
 import taichi as ti
 
-from ..ode.staged import kick_drift_node
+from ..ode.staged import kick_drift_node, rk_stage_node
 from ..xpbd.constraints import sweep_serial
 from ..xpbd.solver import predict_node
 from .constraints import drive_node, finalize_node, write_moves
@@ -49,7 +50,8 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
               times: ti.types.ndarray(), h: ti.f64, begin: ti.i32, moves: ti.types.ndarray(),
               n_moves: ti.i32, poses: ti.types.ndarray(), n_shapes: ti.i32, xpbd: ti.template(),
               x_prev: ti.template(), lam: ti.template(), iterations: ti.i32, segments: ti.template(),
-              A: ti.template()) -> ti.f64:
+              A: ti.template(), rows: ti.template(), b: ti.template(), vs: ti.template(), yx: ti.template(),
+              yv: ti.template()) -> ti.f64:
     """``moves``: (≥ n_moves, 4) f64 rows (node, x, y, z): pin targets set since the last step
     (a pin path's per-frame move), written here instead of one field write per component.
     ``poses``: (k, ≥ n_shapes, 6) rows (position, velocity) of the moving colliders' first
@@ -58,8 +60,9 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
     Returns the divergence flag (bad_t) after the run, so the driver needs no read-back launch.
     ``times``: (k, 2) f64, (α, t_end) of each of the k substeps of h to run. ``begin``: 1 at a
     frame's first substep (pinned nodes' pin_start = where they are, as ``begin_frame``).
-    ``xpbd``: an XPBD step (``x_prev``, ``lam``, ``iterations``) or else the splitting scheme's
-    ``segments`` ((slot, kick, drifts), as FieldStepper) over the stepper's accelerations ``A``."""
+    ``xpbd``: an XPBD step (``x_prev``, ``lam``, ``iterations``); else a Runge–Kutta tableau's
+    ``rows`` and ``b`` when ``rows`` is not empty (stage buffers ``vs``, ``yx``, ``yv``), or the
+    splitting scheme's ``segments`` ((slot, kick, drifts)), as FieldStepper, over its accelerations ``A``."""
     X, V, w = ti.static(state.node_pos, state.node_vel, model.node_inv_mass)
     n = ti.static(model.node_count)
     g = ti.cast(fields.gravity[None], model.dtype)  # fields: engine.forces.fields.PointForces
@@ -87,6 +90,16 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
                 sweep_serial(model, X, x_prev, w, lam, hh)
             for i in range(n):
                 V[i] = (X[i] - x_prev[i]) / hh
+        elif ti.static(len(rows)):  # explicit RK: stage j from the stages before it (FieldStepper.step)
+            for i in range(n):
+                A[0, i] = gather_node(model, fields, g, X, V, i)
+            for j in ti.static(range(1, len(rows))):
+                for i in range(n):
+                    rk_stage_node(X, V, A, vs, yx, yv, i, hh, rows[j], False)
+                for i in range(n):
+                    A[j, i] = gather_node(model, fields, g, yx, yv, i)
+            for i in range(n):
+                rk_stage_node(X, V, A, vs, yx, yv, i, hh, b, True)
         else:
             for seg in ti.static(range(len(segments))):
                 slot, kick, drifts = ti.static(segments[seg][0], segments[seg][1], segments[seg][2])

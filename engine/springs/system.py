@@ -257,7 +257,7 @@ class SpringSystem:
             return False  # the colliders turn between substeps (or a rigid solver places its shapes): the host places them
         if self.integrator == "xpbd":
             return True
-        return self.accumulate == "gather" and hasattr(self.stepper, "_segments")
+        return self.accumulate == "gather"  # (a splitting scheme's kick–drifts or a tableau's stages)
 
     def _fused_steps(self, t0: float, h: float, j: int, n: int) -> int:
         """Steps j … n−1 of the frame in one launch; the same times as :meth:`fixed_step`'s."""
@@ -273,10 +273,12 @@ class SpringSystem:
             spr = st.groups[0] if st.groups else None
             lam = spr.lam if spr is not None else st.x_prev
             its = st.iterations if spr is not None else 0
-            args = (True, st.x_prev, lam, its, (), st.x_prev)
-        else:
+            args = (True, st.x_prev, lam, its, (), st.x_prev, (), (), st.x_prev, st.x_prev, st.x_prev)
+        elif hasattr(st, "_segments"):
             segs = tuple((slot, kick, tuple(drifts)) for slot, kick, drifts in st._segments)
-            args = (False, x0, x0, 0, segs, st.a)
+            args = (False, x0, x0, 0, segs, st.a, (), (), st.a, x0, x0)
+        else:  # a Runge–Kutta tableau
+            args = (False, x0, x0, 0, (), st.a, st._rows, st._b, st.vs, st.yx, st.yv)
         n_shapes, poses = 0, np.zeros((1, 1, 6), np.float32)
         if self._contacts.on:
             poses = np.zeros((1, 1, 6), self.colliders._np)  # (the fields' dtype: one compile)
