@@ -371,3 +371,29 @@ def test_a_frame_in_one_launch_places_a_moving_collider_as_the_host_does():
     assert np.array_equal(pa["position"], pb["position"]) and np.array_equal(ca, cb)
     assert np.array_equal(pa["velocity"], pb["velocity"]) and np.abs(pa["velocity"]).max() > 0
     assert np.array_equal(ca, pa["position"].astype(np.float32))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["euler", "midpoint", "rk4"])
+def test_a_frame_of_explicit_rk_substeps_in_one_launch_is_the_launched_frame(method):
+    """engine.springs.fused runs an explicit tableau's stages (stage sums, then a gather) for a
+    whole frame in one launch: the same bytes as FieldStepper's launch per stage and substep, on a
+    damped chain swinging from its pin onto a ground plane (contacts located in the steps)."""
+    from engine.colliders import ColliderSpec, Colliders
+    from engine.springs import chain
+
+    def run(fuse):
+        top = chain(12, start=(0.0, 1.0, 0.0), direction=(1.0, -0.2, 0.0), length=1.2, ks=400.0, kd=0.5)
+        s = SpringSystem(top, colliders=Colliders([ColliderSpec("plane", point=(0.0, 0.3, 0.0))]),
+                         integrator=method, substeps="auto")
+        if not fuse:
+            s._fusable = lambda: False
+        assert s._fusable() == fuse
+        for _ in range(12):
+            s.step(1 / 30)
+        return s.positions()
+
+    a, b = run(True), run(False)
+    assert np.array_equal(a, b), np.abs(a - b).max()
+    assert a[:, 1].min() > 0.29 and np.abs(a - chain(12, start=(0.0, 1.0, 0.0), direction=(1.0, -0.2, 0.0),
+                                                    length=1.2).positions).max() > 0.1  # it swung and landed
