@@ -97,8 +97,17 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
         _own_thread()
         return "host"
     level = {"warn": ti.WARN, "error": ti.ERROR}[log_level]
+    # cfg_optimization off: Taichi's own CFG passes (store-to-load forwarding over a reaching-
+    # definitions analysis, dead-store elimination over live variables) are superlinear in a
+    # task's size and were ~2/3 of compiling the large step kernels (crates' located step_fixed:
+    # 92 -> 37 s cold, its first frame 112 -> 48 s; every config's cold run ~2x faster); LLVM's
+    # mem2reg, GVN and DSE do that work after it, so frame times stay within this machine's noise
+    # (README's figures, 2026-11-26). Frames are deterministic either way; the switch moves the
+    # last bits of some scenes (hair and crates the same for their first frames, water within
+    # 3e-5 m after two; chaotic scenes grow that). Autodiff's adjoints need the passes:
+    # cfg_optimized() below.
     kwargs = dict(default_fp=ti.f32, offline_cache=True, log_level=level, debug=debug,
-                  random_seed=0, kernel_profiler=kernel_profiler)
+                  random_seed=0, kernel_profiler=kernel_profiler, cfg_optimization=False)
     if os.environ.get("PARTICLES_TI_CACHE"):
         kwargs["offline_cache_file_path"] = os.environ["PARTICLES_TI_CACHE"]
     if threads and arch in ("cpu", "auto"):
@@ -198,6 +207,21 @@ def _write_cache_at_exit() -> None:
         reset()
     except Exception:  # pragma: no cover - nothing to report to at exit
         pass
+
+
+@contextlib.contextmanager
+def cfg_optimized():
+    """Taichi's CFG passes on for the kernels compiled inside (``init`` turns them off): reverse-
+    mode autodiff needs them — an adjoint compiled without them came out wrong (a harmonic well's
+    gradient off by 115 N/kg, tests/test_potential.py). Wrap every ``kernel.grad()`` call: the
+    switch is read when a kernel compiles, so a compiled one pays only two attribute writes."""
+    cfg = ti.lang.impl.current_cfg()
+    before = cfg.cfg_optimization
+    cfg.cfg_optimization = True
+    try:
+        yield
+    finally:
+        cfg.cfg_optimization = before
 
 
 def on_reset(hook) -> None:

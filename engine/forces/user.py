@@ -19,6 +19,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry.colouring import greedy_colors, schedule
+from ..runtime import cfg_optimized
 from .elements import node_slots
 
 
@@ -210,7 +211,8 @@ class UserEnergy:
         self.xe.grad.fill(0)
         self.psi.grad.fill(1)
         self._element_energy()
-        self._element_energy.grad()
+        with cfg_optimized():  # (an adjoint compiles right only with Taichi's CFG passes: engine.runtime)
+            self._element_energy.grad()
 
     # -- the element-group protocol (engine.forces.elements.ElementGroup) ---------------------------
     def node_bounds(self):

@@ -33,6 +33,7 @@ import numpy as np
 import taichi as ti
 
 from ..forces.user import check_reads
+from ..runtime import cfg_optimized
 from ..ode.steppers import is_finite
 
 PRE, POST, REPORT = 0, 1, 2  # what gather() selects: the step's first kick, its second, the energy report
@@ -156,16 +157,20 @@ class ParticlePotential:
         self.rows.fill(0)
         try:
             self._gather(0.0, PRE)
-            self._values.grad()
+            self._values_grad()
             self._kick(0.0)
         finally:
             self.rows.from_numpy(rows)
+
+    def _values_grad(self) -> None:
+        with cfg_optimized():  # (an adjoint compiles right only with Taichi's CFG passes: engine.runtime)
+            self._values.grad()
 
     def half_kick(self, t: float, h: float, phase: int) -> None:
         """v −= (d/2) ∇U(x), d the particle's share of the step of h (``phase`` PRE or POST); t:
         the time the kick happens (s), recorded if a gradient is not finite."""
         self._gather(h, phase)
-        self._values.grad()
+        self._values_grad()
         self._kick(t)
 
     def energy(self) -> float:
@@ -191,7 +196,7 @@ class ParticlePotential:
         d = np.zeros(max(1, self.cap), np.float32)
         d[: len(x)] = 1
         self.kick_dt.from_numpy(d)
-        self._values.grad()
+        self._values_grad()
         return self.xe.grad.to_numpy()[: len(x)].astype(np.float64)
 
     def failed_at(self):
