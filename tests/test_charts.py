@@ -1,6 +1,9 @@
 """`particles chart` in quick mode: files written, and the work–precision data behave as theory says."""
 import csv
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -12,25 +15,50 @@ from particles_tools.charts import run_charts  # noqa: E402
 from particles_tools.charts.workprec import FIELDS, fixed_slope  # noqa: E402
 from engine.ode import solve  # noqa: E402
 from particles_tools.problems import DAMPED_SPRING  # noqa: E402
+from runhelp import ENV, ROOT  # noqa: E402
+
+
+# the chart tests share one run of the whole command (below): on one xdist worker
+# (``--dist loadgroup`` in the slow runs), so it is computed once
+pytestmark = pytest.mark.xdist_group("charts")
 
 
 @pytest.fixture(scope="module")
 def quick_charts(tmp_path_factory):
-    # the charts these tests read; the real-scene charts (minutes of sparks and cloth at small h)
-    # are checked by the slow test below
+    """The whole ``particles chart --quick`` as a real ``python -m engine`` process, once for every
+    chart test here: its folder and the paths it printed. A real process because the command once
+    died of a segmentation fault after the work–precision charts with nothing printed (a crash is
+    an exit code below zero); every test reads the files it wrote."""
     out = tmp_path_factory.mktemp("charts")
-    return out, run_charts(out, quick=True, which=["workprec", "stability", "energy"])
+    r = subprocess.run([sys.executable, "-m", "engine", "chart", "--quick", "--quiet", "--out", str(out)],
+                       cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=2400)
+    assert r.returncode == 0, f"exit {r.returncode}: {r.stderr[-2000:]}"
+    return out, r.stdout.split()
 
 
 @pytest.mark.slow
-def test_scene_charts_are_written(tmp_path):
-    paths = run_charts(tmp_path, quick=True, which="scenes")
-    names = sorted(p.split("/")[-1] for p in paths)
+def test_chart_writes_every_chart(quick_charts):
+    """The whole ``particles chart`` (every chart, quick sweeps): it segfaulted before."""
+    from particles_tools.charts import CHARTS
+
+    _out, paths = quick_charts
+    written = {os.path.basename(p) for p in paths}
+    for stem in ("stability", "energy_drift", "bounce", "workprec_kepler", "workprec_scene_sparks", "fluid"):
+        assert {f"{stem}.png", f"{stem}.csv"} <= written, (stem, sorted(written))
+    assert "soft_energy" in CHARTS and any(w.startswith("soft_energy") for w in written), sorted(written)
+    for p in paths:
+        assert os.path.getsize(p) > 0
+
+
+@pytest.mark.slow
+def test_scene_charts_are_written(quick_charts):
+    out, paths = quick_charts
+    names = sorted(n for n in (p.split("/")[-1] for p in paths) if n.startswith("workprec_scene"))
     assert names == ["workprec_scene_cloth.csv", "workprec_scene_cloth.png",
                      "workprec_scene_sparks.csv", "workprec_scene_sparks.png"]
-    rows = _rows(tmp_path / "workprec_scene_sparks.csv")
+    rows = _rows(out / "workprec_scene_sparks.csv")
     assert rows and all(r["nfev"] > 0 for r in rows)
-    assert not [f for f in tmp_path.iterdir() if f.name.startswith(".")]  # no temporaries left
+    assert not [f for f in out.iterdir() if f.name.startswith(".")]  # no temporaries left
 
 
 def _rows(path):
@@ -148,9 +176,9 @@ def test_step_doubling_evaluations_against_rk45_at_equal_error(quick_charts):
 
 
 @pytest.mark.slow
-def test_bounce_chart_located_impacts_beat_projected_ones(tmp_path):
-    run_charts(tmp_path, quick=True, which="bounce")
-    rows = _rows(tmp_path / "bounce.csv")
+def test_bounce_chart_located_impacts_beat_projected_ones(quick_charts):
+    out, _ = quick_charts
+    rows = _rows(out / "bounce.csv")
     assert len({r["problem"] for r in rows}) == 4
     for prob in {r["problem"] for r in rows}:
         err = lambda m: [r["error"] for r in rows if r["problem"] == prob and r["method"] == m]  # noqa: E731

@@ -1,8 +1,8 @@
 """Every command the README documents runs to exit 0 as a real process (slow; CI runs it).
 
-``particles chart`` once died of a segmentation fault with nothing printed, after the
-work–precision charts: each command here is a real ``python -m engine`` process, so a crash is
-an exit code below zero, and a failure must print exactly one error line. The commands run in
+Each command here is a real ``python -m engine`` process, so a crash is an exit code below zero
+(``particles chart`` once died of a segmentation fault with nothing printed: its whole run is
+tests/test_charts.py's shared fixture), and a failure must print exactly one error line. The commands run in
 their quick or small forms (the same code paths, fewer points).
 """
 import os
@@ -34,19 +34,6 @@ def test_list_validate_schema_ode(tmp_path):
     ok(particles("validate", *cfgs))
     assert '"title"' in ok(particles("schema")).stdout
     ok(particles("ode", "decay", "--method", "rk4", "--h", "0.1"))
-
-
-def test_chart_writes_every_chart(tmp_path):
-    """The whole ``particles chart`` (every chart, quick sweeps): it segfaulted before."""
-    from particles_tools.charts import CHARTS
-
-    r = ok(particles("chart", "--quick", "--quiet", "--out", tmp_path))
-    written = {os.path.basename(p) for p in r.stdout.split()}
-    for stem in ("stability", "energy_drift", "bounce", "workprec_kepler", "workprec_scene_sparks", "fluid"):
-        assert {f"{stem}.png", f"{stem}.csv"} <= written, (stem, sorted(written))
-    assert "soft_energy" in CHARTS and any(w.startswith("soft_energy") for w in written), sorted(written)
-    for p in r.stdout.split():
-        assert os.path.getsize(p) > 0
 
 
 def test_run_profile_gallery(tmp_path):
