@@ -23,7 +23,7 @@ from runhelp import ENV, ROOT  # noqa: E402
 pytestmark = pytest.mark.xdist_group("charts")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # (module scope was set up again when a worker came back to the module)
 def quick_charts(tmp_path_factory):
     """The whole ``particles chart --quick`` as a real ``python -m engine`` process, once for every
     chart test here: its folder and the paths it printed. A real process because the command once
