@@ -18,15 +18,12 @@ from particles_tools.problems import DAMPED_SPRING  # noqa: E402
 from runhelp import ENV, ROOT  # noqa: E402
 
 
-# the chart tests share one run of the whole command (below): on one xdist worker
-# (``--dist loadgroup`` in the slow runs), so it is computed once
-pytestmark = pytest.mark.xdist_group("charts")
-
-
 @pytest.fixture(scope="session")  # (module scope was set up again when a worker came back to the module)
 def quick_charts(tmp_path_factory):
-    """The whole ``particles chart --quick`` as a real ``python -m engine`` process, once for every
-    chart test here: its folder and the paths it printed. A real process because the command once
+    """The whole ``particles chart --quick`` as a real ``python -m engine`` process, once per test
+    process for every chart test here (an xdist worker that draws none runs none; pytest-xdist's
+    --dist loadgroup did not keep a marked group on one worker here, 3.8.0): its folder and the
+    paths it printed. A real process because the command once
     died of a segmentation fault after the work–precision charts with nothing printed (a crash is
     an exit code below zero); every test reads the files it wrote."""
     out = tmp_path_factory.mktemp("charts")
