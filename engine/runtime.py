@@ -100,7 +100,7 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
     # cfg_optimization off: Taichi's own CFG passes (store-to-load forwarding over a reaching-
     # definitions analysis, dead-store elimination over live variables) are superlinear in a
     # task's size and were ~2/3 of compiling the large step kernels (crates' located step_fixed:
-    # 92 -> 37 s cold, its first frame 112 -> 48 s; every config's cold run ~2x faster); LLVM's
+    # 92 -> 37 s cold, its first frame 112 -> 48 s; 40-frame cold runs of nine configs 1.3-2.4x faster); LLVM's
     # mem2reg, GVN and DSE do that work after it, so frame times stay within this machine's noise
     # (README's figures, 2026-11-26). Frames are deterministic either way; the switch moves the
     # last bits of some scenes (hair and crates the same for their first frames, water within

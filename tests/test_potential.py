@@ -294,3 +294,20 @@ print(len(p["position"]), hashlib.sha256(p["position"].tobytes() + p["velocity"]
 def test_frames_with_a_potential_are_byte_identical_on_one_and_two_threads():
     out = [words[-2:] for words in on_thread_counts(PROBE)]
     assert int(out[0][0]) > 100 and out[0] == out[1]
+
+
+def test_every_adjoint_compiles_with_the_cfg_passes():
+    """Taichi's reverse-mode autodiff miscompiled with its CFG passes off (engine.runtime turns
+    them off): every ``.grad()`` call in the engine sits inside ``with cfg_optimized():``."""
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parent.parent / "engine"
+    calls = 0
+    for path in root.rglob("*.py"):
+        lines = path.read_text().splitlines()
+        for k, line in enumerate(lines):
+            if re.search(r"[\w\])]\.grad\(\)", line) and "``" not in line:  # a call, not a docstring's mention
+                calls += 1
+                assert "with cfg_optimized():" in lines[k - 1], f"{path.name}:{k + 1}: {line.strip()}"
+    assert calls >= 2
