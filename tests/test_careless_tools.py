@@ -222,3 +222,29 @@ def test_the_wheel_ships_the_configs():
     from particles_tools import INSTALLED_CONFIGS
 
     assert INSTALLED_CONFIGS.endswith(os.path.join("share", "particles-engine", "configs"))
+
+
+def test_a_signal_inside_foreign_python_code_keeps_the_exit_code(tmp_path):
+    """A stop signal that lands while Taichi runs Python through ``PyRun_String`` (pybind11's
+    ``py::eval``) must still give 143 under ``python -m``: CPython ends such a process by SIGINT
+    (-2) when an exact KeyboardInterrupt left that code, however it was caught later (CI saw it
+    once). ``ctypes.pythonapi.PyRun_SimpleString`` stands in for Taichi's call."""
+    import subprocess
+    import sys
+
+    from runhelp import ROOT
+
+    (tmp_path / "stopme.py").write_text(
+        "import ctypes, sys\n"
+        "from particles_tools.signals import StopRequest\n"
+        "with StopRequest() as stop:\n"
+        "    try:\n"
+        "        ctypes.pythonapi.PyRun_SimpleString(b'import os, signal, time\\n'\n"
+        "            b'os.kill(os.getpid(), signal.SIGTERM)\\ntime.sleep(5)')\n"
+        "    except KeyboardInterrupt:\n"
+        "        pass\n"
+        "sys.exit(128 + stop.signum)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), ROOT]))
+    done = subprocess.run([sys.executable, "-m", "stopme"], env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 143, (done.returncode, done.stderr)
