@@ -68,7 +68,8 @@ class NodeContacts:
         self.colliders = colliders
         self.dtype = colliders.dtype if self.on else ti.f32
         if self.on:
-            self.locate = located_step(ballistic(self.dtype), colliders, 12, self.dtype, quadratic=True)
+            self.locate = located_step(ballistic(self.dtype), colliders, 12, self.dtype, quadratic=True,
+                                       first_apart=True)
 
 
 @ti.func
