@@ -265,8 +265,10 @@ def located_step(step, events, n: int, dtype, quadratic: bool = False, first_apa
         # answer. ``step`` is inlined at each call site, the forces' code with it: by default it
         # has one, in the loop (with a second one for the first pass, a located step doubling
         # RK4 with turbulence and two colliders compiled in 22 s instead of 10). ``first_apart`` keeps
-        # the whole step's call before the loop, for a cheap ``step`` whose callers rely on its
-        # rounding there (the spring nodes' ballistic path: the fused and launched soft-body
+        # the whole step's call before the loop: twice the code, but the plain step (most
+        # elements, most steps) runs outside the loop, faster (a fixed-step particle step with
+        # located impacts ~15 % faster in the bench), and a caller that relies on its rounding
+        # there keeps it (the spring nodes' ballistic path: the fused and launched soft-body
         # frames give the same bits so).
         zero = ti.Vector.zero(dtype, 3)
         s, length = ti.cast(0.0, dtype), ti.cast(h, dtype)

@@ -96,7 +96,11 @@ class ParticleIntegrator:
         self.dstep = doubling_step(method, deriv, 8, ti.f32, extrapolate, fq=deriv_q) if adaptive else None
         if self.located:
             stepper = doubling_error(self.dstep) if adaptive else fixed_error(self.step, ti.f32)
-            self.locate = located_step(stepper, colliders, 8, ti.f32, quadratic)
+            # a fixed step keeps its whole step's own call site (the plain step outside the
+            # loop over pieces runs faster: the bench's located step x1.24 of the projected
+            # one, x1.43 with one site); step doubling's is three steps, so it takes one site
+            # (a located adaptive RK4 kernel compiled in 10 s instead of 22)
+            self.locate = located_step(stepper, colliders, 8, ti.f32, quadratic, first_apart=not adaptive)
         if adaptive and self.located:
             n = max(1, self.cap)
             self.cand_hit = ti.field(ti.i32, shape=n)  # collider + 1 (0: none), negative: it stopped the particle
