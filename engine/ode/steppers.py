@@ -135,7 +135,9 @@ def doubling_step(method: str, f: Callable, n: int, dtype, extrapolate: bool = F
         # the full step, then the two halves, as one runtime loop around one inlined step: a
         # step inlined three times (RK4: 11 evaluations of f inlined, the forces' code each) was
         # most of a located adaptive kernel's compile (5.6 min cold for turbulence and two
-        # colliders); looped, it is 4. The same operations on the same values in the same order.
+        # colliders); looped, it is 4. The same operations on the same values in the same order,
+        # but not always the same bits: under fast math LLVM rounds the loop's code otherwise
+        # than the unrolled steps' (an adaptive scene's f32 error estimate moved by 1.5e-4).
         half = h / 2
         ya, ta, ha = y, t, h
         d = y
