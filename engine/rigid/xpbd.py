@@ -66,28 +66,30 @@ class XPBDSolver:
         self.model, self.state, self.joints = model, state, joints
         self.awake = np.ones(model.count, bool)
         self.nj = len(joints) if joints is not None else 0
-        self.F = None
+        self._lease = None  # kernel.Lease: pooled fields, back to the pool with this solver
         # room for a box's 8-point manifolds with its neighbours: growing recompiles the kernels
         self._capacity = max(1024, capacity, 24 * model.count)
 
     def _fields(self, nc: int):
-        if self.F is None or nc > self.F.capacity:
+        if self._lease is None or nc > self._lease.F.capacity:
             cap = self._capacity
             while cap < nc:
                 cap *= 2
             self._capacity = cap
             m = self.model
             plan = self.joints.direct_plan() if self.nj else None
-            self.F = F = kernel.Fields(m.count, cap, self.nj, plan)
+            self._lease = None  # the outgrown fields go back to the pool first
+            self._lease = kernel.lease(m.count, cap, self.nj, plan)
+            F = self._lease.F
             F.inertia.from_numpy(_pad(m.body_inertia, F.nb))
             F.kin.from_numpy(_pad(m.body_kinematic.astype(np.int32), F.nb))
             if self.nj:
                 names = "jt ja jb jra jrb jaxa jaxb jpa jpb jqrel jlo jhi jlim jalpha".split()
                 for k, arr in zip(names, self.joints.arrays()[1:]):
-                    getattr(F, k).from_numpy(arr)
-                F.jdir.from_numpy(plan["flag"])
-            F.substeps(0, 0.0, [0.0, 0.0, 0.0], 0.0, 0, 0)  # compile now
-        return self.F
+                    getattr(F, k).from_numpy(_pad(arr, F.nj))
+                F.jdir.from_numpy(_pad(plan["flag"], F.nj))
+            F.substeps(0, 0.0, [0.0, 0.0, 0.0], 0.0, 0, 0)  # compile now (pooled: compiled)
+        return self._lease.F
 
     def step(self, h: float, substeps: int, g, C: ContactSet, kinematic=None) -> None:
         """``substeps`` substeps of h/substeps under gravity g with the step's contacts C.
