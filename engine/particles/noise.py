@@ -55,10 +55,7 @@ def curl_noise(p, octaves: ti.template()):
     out = ti.Vector([0.0, 0.0, 0.0])
     amp = 1.0
     q = p
-    # a loop at run time, not unrolled: the noise is inlined wherever the forces are (a located
-    # RK4 step evaluates them at 8 call sites), and one copy per octave made the step's compile
-    # the longest of a scene's (debris under RK4: step_fixed 139 s cold)
-    for o in range(octaves):
+    for o in ti.static(range(octaves)):
         _, gx, gy, gz = value_noise3_grad(q, 11 + o)
         out += amp * ti.Vector([gy[2] - gz[1], gz[0] - gx[2], gx[1] - gy[0]])
         amp *= 0.5
