@@ -57,10 +57,7 @@ def test_adaptive_particle_step_sizes_kept():
     the same day when step doubling's three steps became one loop around one inlined step
     (engine.ode.steppers.doubling_step; this scene's kernel compiled in 10 s instead of 338):
     from the second step h differed by 1.5e-4 relative (the error estimate's f32 rounding),
-    224 steps against 219, the same 2 rejections and slots, the particles within 1.6 cm. Again on
-    2026-11-27 when RK4's stages became a run-time loop around one call of f (engine.ode.steppers:
-    the forces inlined once per call site, not per stage): from the second step h differed by
-    3.1e-4 relative, 213 steps against 224, the same 2 rejections and slots, within 1.45 cm."""
+    224 steps against 219, the same 2 rejections and slots, the particles within 1.6 cm."""
     want, got = fixture("h_particles"), adaptive_particles()
     assert want["rejected"] > 0 and want["per_frame"].max() > 4  # a sequence worth pinning
     pinned = int(want["per_frame"][:PINNED_FRAMES].sum())

@@ -67,9 +67,6 @@ def rk_step(tab, f: Callable, dtype, with_k1: bool = False):
     C = coefficients(tab.c)
     B = coefficients(tab.b)
 
-    if s > 1 and all(q[0] == 0 for j in range(1, s) for q in A[j][:-1]):
-        return _with_first_eval(_chain_step(s, A, C, B, f, dtype), f, with_k1)
-
     @ti.func
     def _step(y, t, h, i, d1):
         ks = [d1] * s  # derivatives f(Y_j, t + c_j h), one per stage (a Python list, unrolled)
@@ -79,35 +76,6 @@ def rk_step(tab, f: Callable, dtype, with_k1: bool = False):
         return lincomb(y, h, B, ks, dtype)
 
     return _with_first_eval(_step, f, with_k1)
-
-
-def _chain_step(s, A, C, B, f, dtype):
-    """A tableau whose stages each use only the one before (a_jm = 0 for m < j − 1: midpoint,
-    classic RK4) as a run-time loop over the stages around one call of f: the forces' code is
-    inlined once per stepper call site instead of once per stage (a located RK4 particle step has
-    two call sites: 8 copies of the forces became 2). The same operations in the same order as
-    the unrolled form (y + h a k for a stage, the weights summed in stage order), though under
-    fast math not always the same bits."""
-
-    @ti.func
-    def _step(y, t, h, i, d1):
-        k = d1
-        out = y
-        if ti.static(B[0][0] != 0):
-            out = out + times(h, B[0], dtype) * k
-        for j in range(1, s):
-            ha, hc = ti.cast(0.0, dtype), ti.cast(0.0, dtype)
-            for m in ti.static(range(1, s)):  # stage j's coefficients (constants, selected)
-                if j == m:
-                    ha, hc = times(h, A[m][m - 1], dtype), times(h, C[m], dtype)
-            k = f(y + ha * k, t + hc, i)
-            for m in ti.static(range(1, s)):
-                if ti.static(B[m][0] != 0):
-                    if j == m:
-                        out = out + times(h, B[m], dtype) * k
-        return out
-
-    return _step
 
 
 def _half_masks(n: int):
