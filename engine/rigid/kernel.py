@@ -103,7 +103,10 @@ def room(n: int) -> int:
 # system of that shape takes them with their compiled kernels: a level rebuilt after an edit, or a
 # test's second case, compiles nothing. Everything a step reads is loaded by its owner or written
 # by the step before it is read (bodies and contacts each step; inertia, kinds, joints and plan
-# when leased), so pooled fields give the same bytes as new ones (tests/test_rigid.py).
+# when leased), so pooled fields give the same bytes as new ones (tests/test_rigid.py). Memory:
+# a dropped system's fields were never freed before either (freeing a field destroys its SNode
+# tree, which drops every compiled kernel of the program: engine.reuse), so the pool holds no
+# more than the process did, and reuses it.
 _idle: dict = {}  # key -> [Fields, ...] free
 _leased: Counter = Counter()  # key -> Fields of that key held by live leases
 
