@@ -100,7 +100,7 @@ def test_a_dropped_scenes_rigid_fields_serve_the_next_of_its_shape_with_the_same
     """The XPBD fields (and their compiled kernels) of a scene that is gone go to the next scene
     of that shape, never to a second one while their scene lives, and step it to the same bytes
     as fresh fields: everything a step reads is loaded or written before it is read."""
-    from engine.rigid import kernel
+    from engine.rigid import pool
 
     def box():  # a spinning box sliding: its inertia and friction matter
         s = scene([{"name": "b", "shape": "box", "half_extents": [0.3, 0.1, 0.2], "position": [0.0, 0.3, 0.0],
@@ -124,7 +124,7 @@ def test_a_dropped_scenes_rigid_fields_serve_the_next_of_its_shape_with_the_same
     c, again = ball()
     assert c.rigid.solver._lease.F is Fa
     assert again == fresh
-    held = kernel.lease(1, Fa.capacity, 0)  # while c lives its fields are not handed out
+    held = pool.lease(1, Fa.capacity, 0)  # while c lives its fields are not handed out
     assert held.F is Fb
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import kernel, quat
+from . import kernel, pool, quat
 from .shapes import SPHERE
 
 
@@ -66,7 +66,7 @@ class XPBDSolver:
         self.model, self.state, self.joints = model, state, joints
         self.awake = np.ones(model.count, bool)
         self.nj = len(joints) if joints is not None else 0
-        self._lease = None  # kernel.Lease: pooled fields, back to the pool with this solver
+        self._lease = None  # pool.Lease: pooled fields, back to the pool with this solver
         # room for a box's 8-point manifolds with its neighbours: growing recompiles the kernels
         self._capacity = max(1024, capacity, 24 * model.count)
 
@@ -79,7 +79,7 @@ class XPBDSolver:
             m = self.model
             plan = self.joints.direct_plan() if self.nj else None
             self._lease = None  # the outgrown fields go back to the pool first
-            self._lease = kernel.lease(m.count, cap, self.nj, plan)
+            self._lease = pool.lease(m.count, cap, self.nj, plan)
             F = self._lease.F
             F.inertia.from_numpy(_pad(m.body_inertia, F.nb))
             F.kin.from_numpy(_pad(m.body_kinematic.astype(np.int32), F.nb))
