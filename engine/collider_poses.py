@@ -15,7 +15,7 @@ of them and the spec alone).
 import numpy as np
 import taichi as ti
 
-from .geometry.shapes import BOX, CAPSULE, PLANE, SPHERE, quat_normalize, quat_to_matrix
+from .geometry.shapes import BOX, CAPSULE, PLANE, SPHERE, quat_matrix_t, quat_normalize_t
 
 IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
@@ -58,29 +58,35 @@ class ShapePoses:
             return
         # a shape whose orientation and ω are what they were at the last call keeps its row (resting
         # bodies published as shapes: most of a pile's, a step after step); the row is a function
-        # of those inputs and the spec alone, so reusing it is exact
-        ws = [np.asarray(omegas[k], np.float64).reshape(3) for k in range(self.count)]
-        keys = [np.asarray(quats[k], np.float64).tobytes() + ws[k].tobytes() for k in range(self.count)]
-        todo = [k for k in range(self.count) if keys[k] != self._orient_keys[k]]
-        for k in todo:  # (checked before anything is written: a refused call changes nothing)
-            if ws[k].any() and not self.spins[k]:
-                raise ValueError(f"angular_velocity: collider {self.specs[k].name or k!r} was built without "
-                                 f"rotation (give it an angular_velocity or rotates = true); got {ws[k].tolist()}")
-        qs = {k: quat_normalize(quats[k]) for k in todo}
+        # of those inputs and the spec alone, so reusing it is exact. Per shape on Python floats
+        # (engine.geometry.shapes' ``*_t``): a few shapes' arithmetic costs less so than in arrays.
+        n = self.count
+        Q = np.asarray(quats, np.float64).reshape(n, 4)
+        W = np.asarray(omegas, np.float64).reshape(n, 3)
+        qb, wb = Q.tobytes(), W.tobytes()
+        keys = [qb[32 * k: 32 * k + 32] + wb[24 * k: 24 * k + 24] for k in range(n)]
+        todo = [k for k in range(n) if keys[k] != self._orient_keys[k]]
         if not todo:
             return
+        Ql, Wl = Q.tolist(), W.tolist()
+        for k in todo:  # (checked before anything is written: a refused call changes nothing)
+            if any(Wl[k]) and not self.spins[k]:
+                raise ValueError(f"angular_velocity: collider {self.specs[k].name or k!r} was built without "
+                                 f"rotation (give it an angular_velocity or rotates = true); got {Wl[k]}")
+        qs = {k: quat_normalize_t(*Ql[k]) for k in todo}
         rows = self._orient_rows  # normal, axis x, axis z, angular velocity
         for k in todo:
-            s, q = self.specs[k], qs[k]
-            self._quat[k], self._omega[k] = q, ws[k]
-            R = quat_to_matrix(q)
-            rows[k, 3:6], rows[k, 6:9], rows[k, 9:12] = R[:, 0], R[:, 2], ws[k]
+            q, w = qs[k], Wl[k]
+            self._quat[k], self._omega[k] = q, w
+            m = quat_matrix_t(q)  # row-major: the body's x, y, z axes are its columns
             if self.kinds[k] in (CAPSULE, BOX):
-                rows[k, 0:3] = R[:, 1]
+                normal = (m[1], m[4], m[7])
             else:  # a plane's normal (at its rest orientation exactly as configured)
-                n0 = np.asarray(s.normal, np.float64)
+                n0 = np.asarray(self.specs[k].normal, np.float64)
                 n0 = n0 / np.linalg.norm(n0)
-                rows[k, 0:3] = n0 if np.array_equal(q, IDENTITY) else R @ n0
+                normal = n0 if q == IDENTITY else np.array(m, np.float64).reshape(3, 3) @ n0
+            rows[k, 0:3] = normal
+            rows[k, 3:12] = (m[0], m[3], m[6], m[2], m[5], m[8], *w)
             self._orient_keys[k] = keys[k]
         boxes = BOX in self.kinds
         _orient_fields(self.collider_normal, self.collider_axis_x if boxes else self.collider_normal,

@@ -21,8 +21,8 @@ from typing import List, Optional, Sequence
 import numpy as np
 import taichi as ti
 
-from .geometry.shapes import quat_normalize, quat_rotvec, quat_mul, spun
-from .paths import Path, sample_path
+from .geometry.shapes import quat_mul, quat_normalize, quat_normalize_t, quat_rotvec, spun_t
+from .paths import Path, sample_path, sample_path_t
 
 
 def _vec(p) -> tuple:
@@ -65,10 +65,18 @@ class ColliderInput:
         return np.asarray(sample_path(self.path, t, self.position), np.float64)
 
     def orientation_at(self, t: float) -> np.ndarray:
-        q = quat_normalize(self.orientation)
+        return np.array(self.orientation_t(t), np.float64)
+
+    def position_t(self, t: float) -> tuple:
+        """:meth:`position_at` as a 3-tuple of floats (several calls a step per shape)."""
+        return sample_path_t(self.path, t, self.position) if self.path else tuple(map(float, self.position))
+
+    def orientation_t(self, t: float) -> tuple:
+        """:meth:`orientation_at` as a 4-tuple of floats (several calls a step per turning shape)."""
+        q = quat_normalize_t(*map(float, self.orientation))
         if not any(self.angular_velocity):
             return q
-        return spun(q, self.angular_velocity, t - self.orientation_time)
+        return spun_t(q, tuple(map(float, self.angular_velocity)), t - self.orientation_time)
 
     @property
     def turns(self) -> bool:
@@ -222,11 +230,11 @@ class Control:
 
     def collider_positions(self, t: float) -> np.ndarray:
         """(K, 3) float64 positions of every collider at time t."""
-        return np.array([c.position_at(t) for c in self.colliders], np.float64).reshape(-1, 3)
+        return np.array([c.position_t(t) for c in self.colliders], np.float64).reshape(-1, 3)
 
     def collider_orientations(self, t: float) -> np.ndarray:
         """(K, 4) float64 orientations [w, x, y, z] of every collider at time t."""
-        return np.array([c.orientation_at(t) for c in self.colliders], np.float64).reshape(-1, 4)
+        return np.array([c.orientation_t(t) for c in self.colliders], np.float64).reshape(-1, 4)
 
     def collider_omegas(self) -> np.ndarray:
         """(K, 3) float64 angular velocities (rad/s, world) of every collider now."""

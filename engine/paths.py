@@ -21,23 +21,31 @@ class Path(list):
         self.points = np.array([k[1] for k in self], np.float64).reshape(len(self), 3)
 
 
+def sample_path_t(path: Sequence, t: float, default: Sequence[float]) -> tuple:
+    """:func:`sample_path` as a 3-tuple of floats. A two-keyframe motion that is not a
+    :class:`Path` (a pose set from code, a rigid body's shape over a step: several a step each) is
+    interpolated on floats, the same arithmetic per component without building arrays."""
+    if len(path) == 2 and not isinstance(path, Path):
+        (t0, p0), (t1, p1) = path
+        t0, t1 = float(t0), float(t1)
+        if t <= t0:
+            return tuple(float(c) for c in p0)
+        if t >= t1:
+            return tuple(float(c) for c in p1)
+        a = (t - t0) / (t1 - t0)
+        return tuple((1 - a) * float(u) + a * float(v) for u, v in zip(p0, p1))
+    return tuple(sample_path(path, t, default).tolist())
+
+
 def sample_path(path: Sequence, t: float, default: Sequence[float]) -> np.ndarray:
     """Position at time t from keyframes [(time, (x, y, z)), ...] sorted by time; clamped at the
     ends. An empty path gives ``default``. A :class:`Path` is searched as it is; any other
-    sequence (a two-keyframe motion from code) is read into arrays first."""
+    sequence is read into arrays first (a two-keyframe one is :func:`sample_path_t`'s)."""
     if not len(path):
         return np.asarray(default, np.float64)
     if not isinstance(path, Path):
-        if len(path) == 2:  # a two-keyframe motion (a pose set from code, a rigid body's shape over
-            # a step: several a step each): the same arithmetic without building arrays first
-            (t0, p0), (t1, p1) = path
-            t0, t1 = float(t0), float(t1)
-            if t <= t0:
-                return np.array(p0, np.float64).reshape(3)
-            if t >= t1:
-                return np.array(p1, np.float64).reshape(3)
-            a = (t - t0) / (t1 - t0)
-            return (1 - a) * np.asarray(p0, np.float64).reshape(3) + a * np.asarray(p1, np.float64).reshape(3)
+        if len(path) == 2:
+            return np.array(sample_path_t(path, t, default), np.float64)
         path = Path(path)
     times, pts = path.times, path.points
     if t <= times[0]:

@@ -34,6 +34,28 @@ def test_inertia_helpers_match_the_closed_forms():
         inertia("plane", m)
 
 
+def test_pose_arithmetic_matches_rodrigues_and_composes_spins():
+    # the host's pose arithmetic (floats, engine.geometry.shapes' *_t, and its NumPy wrappers):
+    # exp of a rotation vector is Rodrigues' rotation R = I + sin θ K + (1 − cos θ) K², two spins
+    # about one axis add, and a zero quaternion is refused naming the key
+    from engine.geometry.shapes import quat_matrix_t, quat_to_matrix, spun_t
+    rng = np.random.default_rng(3)
+    for w in rng.normal(size=(50, 3)) * 2.0:
+        th = np.linalg.norm(w)
+        k = w / th
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        rod = np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+        q = quat_from_rotvec(w)
+        np.testing.assert_allclose(quat_to_matrix(q), rod, atol=1e-14)
+        np.testing.assert_allclose(np.reshape(quat_matrix_t(q.tolist()), (3, 3)), rod, atol=1e-14)
+        q0 = quat_from_rotvec(rng.normal(size=3)).tolist()
+        a, b = rng.uniform(-1.0, 1.0, 2)
+        np.testing.assert_allclose(spun_t(spun_t(q0, w.tolist(), a), w.tolist(), b), spun(q0, w, a + b), atol=1e-14)
+        assert spun(q0, w, 0.0).tolist() == list(spun_t(q0, w.tolist(), 0.0))
+    with pytest.raises(ValueError, match="orientation: a quaternion"):
+        spun([0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.1)
+
+
 def test_kernel_distances_match_the_reference_for_moving_spinning_shapes():
     # f64 table; at `lag` before the step's end a shape is at p − v·lag turned by −ω·lag: the
     # kernel's (g, N) there equal the reference's for that pose, for every kind
