@@ -2,9 +2,9 @@
 them into the table's fields (engine.colliders).
 
 A shape's pose is set from the scene's Control before each step (:meth:`ShapePoses.follow`), or
-by a caller (:meth:`ShapePoses.move_to`): its position and the velocity over the step in one
-launch (:func:`_place`), and, where a shape turns, its normal, box axes and ω in another
-(:func:`_orient_fields`) — rows the host computes, not a ``from_numpy`` a field. The host keeps
+by a caller (:meth:`ShapePoses.move_to`): its position and the velocity over the step and,
+where a shape turns, its normal, box axes and ω, in one launch (:func:`_pose_fields`) — rows the
+host computes, not a ``from_numpy`` a field. The host keeps
 each shape's position, orientation and ω (what :meth:`~ShapePoses.pose` reports and what the
 renderer's kept background redraws around, :meth:`~ShapePoses.shown_bounds`), and reuses a
 shape's orientation row while its orientation and ω are unchanged (exact: the row is a function
@@ -21,29 +21,27 @@ IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 @ti.kernel
-def _place(point: ti.template(), vel: ti.template(), rows: ti.types.ndarray()):
-    """Positions and velocities of every shape from rows (n, 6) = (x, y, z, vx, vy, vz), in the
-    fields' dtype: one launch a step where two ``from_numpy`` cost 0.35 ms of Python."""
+def _pose_fields(point: ti.template(), vel: ti.template(), normal: ti.template(), axis_x: ti.template(),
+                 axis_z: ti.template(), omega: ti.template(), rows: ti.types.ndarray(), place: ti.template(),
+                 turn: ti.template(), boxes: ti.template(), spins: ti.template()):
+    """Every shape's pose from rows (n, 6 [place] + 12 [turn]) in the fields' dtype: position and
+    velocity over the step (``place``: x, y, z, vx, vy, vz), then (``turn``) the normal, the box
+    axes x and z (``boxes``) and ω (``spins``). One launch a step where a field's ``from_numpy``
+    costs ~0.2–0.35 ms of Python each (crates' particles place 25 turning shapes a step) and a
+    second launch for the turning half ~0.2 ms more (debris: five a frame)."""
+    o = ti.static(6 if place else 0)
     for k in range(rows.shape[0]):
         for c in ti.static(range(3)):
-            point[k][c] = rows[k, c]
-            vel[k][c] = rows[k, 3 + c]
-
-
-@ti.kernel
-def _orient_fields(normal: ti.template(), axis_x: ti.template(), axis_z: ti.template(), omega: ti.template(),
-                   rows: ti.types.ndarray(), boxes: ti.template(), spins: ti.template()):
-    """Normals, box axes (``boxes``) and angular velocities (``spins``) of every shape from rows
-    (n, 12) = (normal, axis x, axis z, ω), in the fields' dtype: one launch where up to four
-    ``from_numpy`` cost ~0.18 ms of Python each (crates' particles place 25 turning shapes a step)."""
-    for k in range(rows.shape[0]):
-        for c in ti.static(range(3)):
-            normal[k][c] = rows[k, c]
-            if ti.static(boxes):
-                axis_x[k][c] = rows[k, 3 + c]
-                axis_z[k][c] = rows[k, 6 + c]
-            if ti.static(spins):
-                omega[k][c] = rows[k, 9 + c]
+            if ti.static(place):
+                point[k][c] = rows[k, c]
+                vel[k][c] = rows[k, 3 + c]
+            if ti.static(turn):
+                normal[k][c] = rows[k, o + c]
+                if ti.static(boxes):
+                    axis_x[k][c] = rows[k, o + 3 + c]
+                    axis_z[k][c] = rows[k, o + 6 + c]
+                if ti.static(spins):
+                    omega[k][c] = rows[k, o + 9 + c]
 
 
 class ShapePoses:
@@ -55,7 +53,7 @@ class ShapePoses:
         the normals, capsule axes and box axes written to the fields. A plane left at its rest
         orientation keeps its configured normal exactly (no rotation arithmetic)."""
         if self.count == 0:
-            return
+            return False
         # a shape whose orientation and ω are what they were at the last call keeps its row (resting
         # bodies published as shapes: most of a pile's, a step after step); the row is a function
         # of those inputs and the spec alone, so reusing it is exact. Per shape on Python floats
@@ -67,7 +65,7 @@ class ShapePoses:
         keys = [qb[32 * k: 32 * k + 32] + wb[24 * k: 24 * k + 24] for k in range(n)]
         todo = [k for k in range(n) if keys[k] != self._orient_keys[k]]
         if not todo:
-            return
+            return False
         Ql, Wl = Q.tolist(), W.tolist()
         for k in todo:  # (checked before anything is written: a refused call changes nothing)
             if any(Wl[k]) and not self.spins[k]:
@@ -88,11 +86,19 @@ class ShapePoses:
             rows[k, 0:3] = normal
             rows[k, 3:12] = (m[0], m[3], m[6], m[2], m[5], m[8], *w)
             self._orient_keys[k] = keys[k]
-        boxes = BOX in self.kinds
-        _orient_fields(self.collider_normal, self.collider_axis_x if boxes else self.collider_normal,
-                       self.collider_axis_z if boxes else self.collider_normal,
-                       self.collider_omega if self.rotating else self.collider_normal,
-                       rows.astype(self._np), boxes, self.rotating)
+        return True
+
+    def _write(self, place_rows=None, turned: bool = False) -> None:
+        """Write :meth:`_pose_row`'s rows (``place_rows``) and, where ``turned``, the orientation
+        rows :meth:`_orient` left, into the fields: one launch (none for nothing)."""
+        if place_rows is None and not turned:
+            return
+        rows = place_rows if not turned else self._orient_rows.astype(self._np) if place_rows is None else (
+            np.concatenate([place_rows, self._orient_rows.astype(self._np)], axis=1))
+        boxes, f = BOX in self.kinds, self.collider_normal
+        _pose_fields(self.collider_point, self.collider_vel, f, self.collider_axis_x if boxes else f,
+                     self.collider_axis_z if boxes else f, self.collider_omega if self.rotating else f,
+                     rows, place_rows is not None, turned, boxes, self.rotating)
 
     def reset(self) -> None:
         """Back where the specs start, at rest, at t = 0 (a reused scene)."""
@@ -102,7 +108,8 @@ class ShapePoses:
             self.collider_point.from_numpy(self._pos)
             self.collider_vel.from_numpy(np.zeros_like(self._pos))
         if self._turned or self.rotating:
-            self._orient([s.orientation_at(0.0) for s in self.specs], [s.angular_velocity for s in self.specs])
+            self._write(turned=self._orient([s.orientation_at(0.0) for s in self.specs],
+                                            [s.angular_velocity for s in self.specs]))
         self._t, self._moved, self._turned = 0.0, False, False
 
     def _placed(self, positions) -> np.ndarray:
@@ -137,12 +144,13 @@ class ShapePoses:
         (count, 3) rad/s over the step: given, or (a table with spinning shapes) from the specs."""
         if self.count == 0:
             return
-        _place(self.collider_point, self.collider_vel, self._pose_row(t, positions, since))
+        place, turned = self._pose_row(t, positions, since), False
         if orientations is not None or omegas is not None or self.rotating:
             qs = [s.orientation_at(t) for s in self.specs] if orientations is None else orientations
             ws = [s.angular_velocity for s in self.specs] if omegas is None else omegas
-            self._orient(qs, ws)
+            turned = self._orient(qs, ws)  # (checked before anything is written: a refused call changes nothing)
             self._turned = True
+        self._write(place, turned)
 
     def follow(self, control, t0: float, t1: float) -> bool:
         """Place the shapes where ``control`` (engine.control) has them at t1, moving since t0

@@ -194,7 +194,8 @@ class Colliders(ShapePoses, ProjectedShapes):
         self.collider_point.from_numpy(self._pos)
         self._orient_keys = [None] * self.count  # what each shape's row below was made from
         self._orient_rows = np.zeros((max(1, self.count), 12))
-        self._orient([s.orientation_at(0.0) for s in self.specs], [s.angular_velocity for s in self.specs])
+        self._write(turned=self._orient([s.orientation_at(0.0) for s in self.specs],
+                                        [s.angular_velocity for s in self.specs]))
         self._t = 0.0
         self._band = contact_band(dtype)
         self._moved = False
