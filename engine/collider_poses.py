@@ -144,13 +144,13 @@ class ShapePoses:
         (count, 3) rad/s over the step: given, or (a table with spinning shapes) from the specs."""
         if self.count == 0:
             return
-        place, turned = self._pose_row(t, positions, since), False
+        turned = False
         if orientations is not None or omegas is not None or self.rotating:
             qs = [s.orientation_at(t) for s in self.specs] if orientations is None else orientations
             ws = [s.angular_velocity for s in self.specs] if omegas is None else omegas
-            turned = self._orient(qs, ws)  # (checked before anything is written: a refused call changes nothing)
+            turned = self._orient(qs, ws)  # first: it checks before it changes anything
             self._turned = True
-        self._write(place, turned)
+        self._write(self._pose_row(t, positions, since), turned)
 
     def follow(self, control, t0: float, t1: float) -> bool:
         """Place the shapes where ``control`` (engine.control) has them at t1, moving since t0

@@ -266,10 +266,10 @@ def test_a_rigid_bodys_shape_is_named_as_the_body():
 
 
 @pytest.mark.slow  # (the default run is near its 5 minutes)
-def test_a_table_reorients_only_shapes_that_turned_and_a_refusal_writes_no_orientation():
+def test_a_table_reorients_only_shapes_that_turned_and_a_refusal_writes_no_pose():
     """Colliders._orient keeps the row of a shape whose orientation and ω did not change: after
     moves where some shapes turn and others rest, the fields hold the bytes a fresh table given
-    the same pose holds; a refused ω (a shape built without rotation) writes no orientation."""
+    the same pose holds; a refused ω (a shape built without rotation) writes no pose at all."""
     from engine.colliders import Colliders, ColliderSpec
 
     specs = [ColliderSpec("box", point=(0, 1, 0), half_extents=(0.3, 0.2, 0.5), rotates=True),
@@ -291,10 +291,13 @@ def test_a_table_reorients_only_shapes_that_turned_and_a_refusal_writes_no_orien
         fresh.move_to(0.1 * (k + 1), pos, orientations=qs, omegas=ws)
         assert all(np.array_equal(a, b) for a, b in zip(fields(table), fields(fresh))), k
         assert np.array_equal(table._quat, fresh._quat) and np.array_equal(table._omega, fresh._omega)
-    before, quat = fields(table), table._quat.copy()
+    before, quat = fields(table) + [table.collider_point.to_numpy(), table.collider_vel.to_numpy()], table._quat.copy()
+    host = table._pos.copy()
     with pytest.raises(ValueError, match="angular_velocity: collider 2 was built without rotation"):
-        table.move_to(0.5, pos, orientations=[qa, qa, I], omegas=[[0, 0, 0], [0, 0, 0], [0, 1, 0]])
-    assert all(np.array_equal(a, b) for a, b in zip(fields(table), before)) and np.array_equal(table._quat, quat)
+        table.move_to(0.5, np.add(pos, 0.25), orientations=[qa, qa, I], omegas=[[0, 0, 0], [0, 0, 0], [0, 1, 0]])
+    after = fields(table) + [table.collider_point.to_numpy(), table.collider_vel.to_numpy()]
+    assert all(np.array_equal(a, b) for a, b in zip(after, before)) and np.array_equal(table._quat, quat)
+    assert np.array_equal(table._pos, host)  # nor a position (the positions are placed after the check)
 
 
 def test_a_collider_built_without_rotation_cannot_be_spun(spheres):
