@@ -231,7 +231,6 @@ class Emitters:
         for p, c, bit, count, min_speed in self.links:
             size = L.sizes[p]
             chunks = max(1, min(CHUNKS, size // CHUNK_MIN))
-            _k.count_events(self.state, self.link_counts, L.starts[p], size, chunks, bit, min_speed)
             _k.spawn_children(self, self.state, self.link_counts, self.link_parent, self.link_slot, L.starts[p],
                               size, chunks, bit, min_speed, c, L.starts[c], L.sizes[c], count)
 
