@@ -69,7 +69,7 @@ class ColliderInput:
 
     def position_t(self, t: float) -> tuple:
         """:meth:`position_at` as a 3-tuple of floats (several calls a step per shape)."""
-        return sample_path_t(self.path, t, self.position) if self.path else tuple(map(float, self.position))
+        return sample_path_t(self.path, t, self.position)
 
     def orientation_t(self, t: float) -> tuple:
         """:meth:`orientation_at` as a 4-tuple of floats (several calls a step per turning shape)."""

@@ -25,6 +25,8 @@ def sample_path_t(path: Sequence, t: float, default: Sequence[float]) -> tuple:
     """:func:`sample_path` as a 3-tuple of floats. A two-keyframe motion that is not a
     :class:`Path` (a pose set from code, a rigid body's shape over a step: several a step each) is
     interpolated on floats, the same arithmetic per component without building arrays."""
+    if not len(path):
+        return tuple(float(c) for c in default)
     if len(path) == 2 and not isinstance(path, Path):
         (t0, p0), (t1, p1) = path
         t0, t1 = float(t0), float(t1)
