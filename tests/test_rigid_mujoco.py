@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.special import ellipk
 
-from test_rigid import G, TUMBLER, run, scene
+from rigid_scenes import G, run, scene
+from test_rigid import TUMBLER
 
 mujoco = pytest.importorskip("mujoco")
 pytestmark = pytest.mark.slow
