@@ -9,7 +9,10 @@ from __future__ import annotations
 import atexit
 import contextlib
 import io
+import linecache
 import os
+import sys
+import textwrap
 import threading
 import weakref
 
@@ -166,17 +169,61 @@ def _memoize_source_positions() -> None:
 
     get_pos_info.memoized, get_pos_info.original = True, original
     ctx_cls.get_pos_info = get_pos_info
-    # and a function's source lines and file, looked up (inspect: tokenize, getmodule) each
-    # time a kernel is built or a ti.func inlined, once a function (weakly held: a scene's
-    # closures go with it)
+    # the text wraps each source line and caret line at 80 columns (``textwrap``, ~26,000 calls
+    # for sparks' first frame, a third of them distinct): a line that fits comes back as it is
+    if getattr(atu, "TextWrapper", None) is textwrap.TextWrapper:
+        atu.TextWrapper = _QuickWrapper
+    # and each kernel or ti.func, as it is decorated, asks whether it is defined in a class by
+    # reading its frame's source line through ``inspect.getframeinfo``, whose file lookup scans
+    # every loaded module (~0.6 ms a decoration, ~0.1 s of a start): read the line directly
     try:
         from taichi.lang import kernel_impl
     except ImportError:  # pragma: no cover
         return
+    taichis = getattr(kernel_impl, "_inside_class", None)
+    if taichis not in (None, _inside_class) and hasattr(kernel_impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES"):
+        _inside_class.taichis = taichis  # (kept for tests/test_startup.py)
+        kernel_impl._inside_class = _inside_class
+    # and a function's source lines and file, looked up (inspect: tokenize, getmodule) each
+    # time a kernel is built or a ti.func inlined, once a function (weakly held: a scene's
+    # closures go with it)
     for name in ("getsourcelines", "getsourcefile"):
         found = getattr(kernel_impl, name, None)
         if found is not None:
             setattr(kernel_impl, name, _memoized_by_function(found))
+
+
+class _QuickWrapper(textwrap.TextWrapper):
+    """``textwrap.TextWrapper`` for Taichi's source-position text: the same lines, quicker. A
+    printable line that fits the width is one line as it is, less trailing spaces (none if it is
+    all spaces), which is what ``wrap`` returns for it (tests/test_startup.py compares the two);
+    a longer one is wrapped by ``TextWrapper`` once and kept (Taichi builds one per call)."""
+
+    _kept: dict = {}
+
+    def wrap(self, text):
+        if len(text) <= self.width and text.isprintable():
+            line = text.rstrip(" ")
+            return [line] if line else []
+        key = (self.width, text)
+        got = self._kept.get(key)
+        if got is None:
+            got = self._kept[key] = super().wrap(text)
+        return list(got)
+
+
+def _inside_class(level_of_class_stackframe):
+    """Taichi's test of whether a kernel or ti.func is being defined in a class body: whether the
+    statement running ``level_of_class_stackframe`` frames up begins ``class`` or
+    ``@…data_oriented`` (Taichi's own patterns), its line read through ``linecache``."""
+    from taichi.lang import kernel_impl
+
+    try:
+        frame = sys._getframe(level_of_class_stackframe)
+        line = linecache.getline(frame.f_code.co_filename, frame.f_lineno).strip()
+    except Exception:  # (as Taichi's: no frame or no source, not a class)
+        return False
+    return any(p.match(line) for p in kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES)
 
 
 def _memoized_by_function(look_up):

@@ -111,3 +111,63 @@ def test_column_writer_writes_what_from_numpy_writes():
     assert not a.to_numpy()[:4].any() and not b.to_numpy()[:4].any()
     assert np.array_equal(a.to_numpy()[4:], ref_a.to_numpy()[4:])
     assert np.array_equal(b.to_numpy()[4:], ref_b.to_numpy()[4:])
+
+
+def test_quick_wrapper_wraps_as_textwrap_does():
+    """engine.runtime's TextWrapper for Taichi's source-position text: the same lines as
+    textwrap's for real source lines (some past 80 columns), caret lines, blanks and tabs."""
+    from engine.runtime import _QuickWrapper
+
+    quick, ref = _QuickWrapper(width=80), textwrap.TextWrapper(width=80)
+    lines = []
+    for name in ("engine/render/composite.py", "engine/runtime.py", "engine/particles/integrate.py"):
+        with open(os.path.join(ROOT, name), encoding="utf-8") as f:
+            lines += f.read().splitlines()
+    assert sum(len(s) > 80 for s in lines) > 10 and sum(len(s) <= 80 for s in lines) > 100
+    carets = [" " * k + "^" * m + " " * t for k in (0, 3, 8, 60) for m in (0, 1, 17, 40) for t in (0, 5)]
+    odd = ["", " ", "    ", "\t", "\tx = 1", "x = 1\t", "a  b  ", "x" * 80, "x" * 81, "x " * 40,
+           " " * 79 + "^", " " * 81, "é" * 80, "a\u00a0b", "a\nb"]
+    for s in lines + carets + odd:
+        assert quick.wrap(s) == ref.wrap(s), repr(s)
+        assert quick.wrap(s) == ref.wrap(s), repr(s)  # a kept long line, the second time
+
+
+def test_class_check_agrees_with_taichis():
+    """engine.runtime's test of whether a kernel is being defined in a class body answers as
+    Taichi's own at each frame level, in a data-oriented class, a plain class and a function."""
+    from taichi.lang import kernel_impl
+
+    ours = kernel_impl._inside_class
+    assert ours is runtime._inside_class  # installed by runtime.init
+    taichis = ours.taichis
+    seen = []
+
+    def probe(fn):  # called as a decorator is: the defining frame is 2 up from ours / Taichi's
+        levels = []
+        for k in (1, 2, 3):  # (a loop, not a comprehension: that would be a frame of its own)
+            levels.append((ours(k), taichis(k)))
+        seen.append(levels)
+        return fn
+
+    @ti.data_oriented
+    class Oriented:
+        @probe
+        def f(self):
+            pass
+
+    class Plain(object):
+        @probe
+        def g(self):
+            pass
+
+    def outer():
+        @probe
+        def h():
+            pass
+
+    outer()
+    assert len(seen) == 3
+    for levels in seen:
+        for got, want in levels:
+            assert got == want
+    assert any(got for levels in seen for got, _ in levels)  # a class body was recognised
