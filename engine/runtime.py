@@ -14,6 +14,7 @@ import os
 import sys
 import textwrap
 import threading
+import types
 import weakref
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")  # no network check at import (PERF-NOTES)
@@ -180,6 +181,13 @@ def _memoize_source_positions() -> None:
         from taichi.lang import kernel_impl
     except ImportError:  # pragma: no cover
         return
+    # and each function's source is re-filled line by line (``textwrap.fill``, width 9999: tabs
+    # expanded, trailing blanks dropped) before it is parsed, ~7,800 lines for sparks' first frame
+    if getattr(kernel_impl, "textwrap", None) is textwrap:
+        shim = types.ModuleType("textwrap")
+        shim.__dict__.update(vars(textwrap))
+        shim.fill = _quick_fill
+        kernel_impl.textwrap = shim
     taichis = getattr(kernel_impl, "_inside_class", None)
     if taichis not in (None, _inside_class) and hasattr(kernel_impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES"):
         _inside_class.taichis = taichis  # (kept for tests/test_startup.py)
@@ -212,6 +220,16 @@ class _QuickWrapper(textwrap.TextWrapper):
         return list(got)
 
 
+def _quick_fill(text, width=70, **kwargs):
+    """``textwrap.fill``, quicker where it changes little: a printable line (less one trailing
+    newline, as ``inspect.getsourcelines`` gives) that fits the width comes back without its
+    trailing spaces and newline (tests/test_startup.py compares the two)."""
+    body = text[:-1] if text.endswith("\n") else text
+    if len(text) <= width and body.isprintable() and set(kwargs) <= {"tabsize"}:
+        return body.rstrip(" ")
+    return textwrap.fill(text, width=width, **kwargs)
+
+
 def _inside_class(level_of_class_stackframe):
     """Taichi's test of whether a kernel or ti.func is being defined in a class body: whether the
     statement running ``level_of_class_stackframe`` frames up begins ``class`` or
@@ -239,6 +257,12 @@ def _memoized_by_function(look_up):
         return got
 
     return memoized
+
+
+# at import, not only at init: a kernel or ti.func at a module's top level is decorated (and asks
+# whether it is in a class) when that module is imported, often before init (the command line
+# imports the scene first)
+_memoize_source_positions()
 
 
 def _write_cache_at_exit() -> None:

@@ -132,6 +132,29 @@ def test_quick_wrapper_wraps_as_textwrap_does():
         assert quick.wrap(s) == ref.wrap(s), repr(s)  # a kept long line, the second time
 
 
+def test_quick_fill_fills_as_textwrap_does():
+    """engine.runtime's textwrap.fill for Taichi's source parsing: the same text as textwrap's
+    for every line of real source files as inspect.getsourcelines gives them (with their
+    newline), and for blanks, tabs and lines past the width."""
+    from taichi.lang import kernel_impl
+
+    from engine.runtime import _quick_fill
+
+    assert kernel_impl.textwrap.fill is _quick_fill  # installed at import
+    assert kernel_impl.textwrap.dedent is textwrap.dedent
+    lines = []
+    for name in ("engine/render/composite.py", "engine/runtime.py", "engine/particles/integrate.py"):
+        with open(os.path.join(ROOT, name), encoding="utf-8") as f:
+            lines += f.readlines()
+    assert sum(s.endswith("\n") for s in lines) > 100
+    odd = ["", "\n", "   \n", "\t\n", "\tx = 1\n", "x = 1   \n", "x\n\n", "x" * 40 + "\n", "x" * 41,
+           "é \n", "a\u00a0b\n", "  a\r\n"]
+    for s in lines + odd:
+        assert _quick_fill(s, tabsize=4, width=9999) == textwrap.fill(s, tabsize=4, width=9999), repr(s)
+    for s in odd:  # a narrow width: wrapped as textwrap wraps
+        assert _quick_fill(s, width=40) == textwrap.fill(s, width=40), repr(s)
+
+
 def test_class_check_agrees_with_taichis():
     """engine.runtime's test of whether a kernel is being defined in a class body answers as
     Taichi's own at each frame level, in a data-oriented class, a plain class and a function."""
