@@ -9,12 +9,12 @@ buffer) tiles [T0 + T1, T0 + T1 + T2).
 
 No float atomics and nothing that depends on the thread count (PERF-NOTES: atomics are slow on
 the CPU and make sums depend on timing):
-1. ``count``: per CHUNK of slots (a fixed number, not the thread count), how many sprites touch
+1. count: per CHUNK of slots (a fixed number, not the thread count), how many sprites touch
    each tile; one thread owns a chunk's histogram row.
-2. ``offsets``: per tile, the exclusive prefix over chunks and the tile's total; block totals by
+2. offsets: per tile, the exclusive prefix over chunks and the tile's total; block totals by
    integer atomics (exact, so order-free).
-3. ``starts``: per block of tiles, the sum of the block totals before it, then a short run over the
-   block's tiles — a two-level parallel scan, nothing serial.
+3. starts: per block of tiles, the sum of the block totals before it, then a short run over the
+   block's tiles — a two-level parallel scan, nothing serial (1–3 are one kernel, ``tally``).
 4. ``scatter``: each chunk writes its records into the tile lists.
 """
 # (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
@@ -50,8 +50,15 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
         return base, tx_n
 
     @ti.kernel
-    def count(hist: ti.types.ndarray(dtype=ti.i32, ndim=2), T: ti.i32, T0: ti.i32, T1: ti.i32,
-              TX0: ti.i32, TX1: ti.i32, TX2: ti.i32):
+    def tally(hist: ti.types.ndarray(dtype=ti.i32, ndim=2),
+              tile_count: ti.types.ndarray(dtype=ti.i32, ndim=1),
+              tile_start: ti.types.ndarray(dtype=ti.i32, ndim=1),
+              block_sum: ti.types.ndarray(dtype=ti.i32, ndim=1), T: ti.i32, T0: ti.i32, T1: ti.i32,
+              TX0: ti.i32, TX1: ti.i32, TX2: ti.i32, NB: ti.i32) -> ti.i32:
+        """Steps 1–3 in one launch (a kernel's top-level loops run one after another, each a
+        parallel pass: a launch costs ~0.1 ms here, more than a step's work); returns the number
+        of tile–sprite pairs."""
+        # 1. count
         ti.loop_config(block_dim=1)  # one chunk per task
         for c in range(chunks):
             for t in range(T):
@@ -64,11 +71,7 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
                         for tx in range(b[0], b[2] + 1):
                             t = base + ty * tx_n + tx
                             hist[c, t] = hist[c, t] + 1  # (not +=: that compiles to an atomic)
-
-    @ti.kernel
-    def offsets(hist: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                tile_count: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                block_sum: ti.types.ndarray(dtype=ti.i32, ndim=1), T: ti.i32, NB: ti.i32):
+        # 2. offsets
         for b in range(NB):
             block_sum[b] = 0
         for t in range(T):
@@ -79,11 +82,7 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
                 run += v
             tile_count[t] = run
             ti.atomic_add(block_sum[t // SCAN_BLOCK], run)  # integer: exact in any order
-
-    @ti.kernel
-    def starts(tile_count: ti.types.ndarray(dtype=ti.i32, ndim=1),
-               tile_start: ti.types.ndarray(dtype=ti.i32, ndim=1),
-               block_sum: ti.types.ndarray(dtype=ti.i32, ndim=1), T: ti.i32, NB: ti.i32) -> ti.i32:
+        # 3. starts
         for b in range(NB):
             run = 0
             for k in range(b):  # NB is T/64 (a few dozen): the quadratic sum is cheaper than a pass
@@ -122,4 +121,4 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
                             pairs[tile_start[t] + k] = rec16
                             hist[c, t] = k + 1
 
-    return count, offsets, starts, scatter
+    return tally, scatter

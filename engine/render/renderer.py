@@ -82,7 +82,7 @@ class Renderer:
             uses_add, uses_alpha = self.look.uses_additive, self.look.uses_alpha
             self.records = SpriteRecords(state.capacity)
             self._sprites = build_sprite_kernel(state, self.look, self.records)
-            self._count, self._offsets, self._starts, self._scatter = build_binning_kernels(
+            self._tally, self._scatter = build_binning_kernels(
                 self.records, state.capacity, self.chunks)
             self.capacity = state.capacity
         self.uses_alpha = uses_alpha
@@ -217,9 +217,8 @@ class Renderer:
         lo_min = LO_MIN_TEXELS / t.scale if t.has_lo else 1e30
         co_min = CO_MIN_TEXELS / (0.5 * t.scale) if t.has_lo else 1e30
         self._sprites(*cam, W, H, t.scale, lo_min, co_min, float(blend))
-        self._count(t.hist, t.T, t.T0, t.T1, t.TX, t.TXl, t.TXc)
-        self._offsets(t.hist, t.tile_count, t.block_sum, t.T, t.NB)
-        total = int(self._starts(t.tile_count, t.tile_start, t.block_sum, t.T, t.NB))
+        total = int(self._tally(t.hist, t.tile_count, t.tile_start, t.block_sum, t.T, t.T0, t.T1, t.TX,
+                                t.TXl, t.TXc, t.NB))
         if total > t.pair_capacity:  # an ndarray: growing it recompiles nothing
             t.grow_pairs(int(total * 1.25) + 1024)
         self.last_pairs = total
