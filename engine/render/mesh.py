@@ -72,29 +72,20 @@ class MeshLayer:
             self.adj_start.from_numpy(starts)
         if self.line_count:
             self.line_idx.from_numpy(self.lines)
-        self._k = _build(self)
+        self._frame = _build(self)
 
     def update(self) -> None:
-        """Copy the bodies' node positions in and recompute the vertex normals."""
+        """Copy the bodies' node positions in (``draw`` recomputes the vertex normals)."""
         if self.nv:
             pos = np.concatenate([d["positions"]() for d in self.draws]).astype(np.float32)
             self.mesh_pos.from_numpy(pos)
-            if self.tri_count:
-                self._k["normals"]()
 
     def draw(self, t, cam) -> None:
         """Rasterise into the frame targets ``t`` (engine.render.targets.FrameTargets): the
         visibility buffer and line sums, then shade the touched tiles into ``t.fbg``/``t.fdep``."""
-        k = self._k
-        W, H, TX = t.W, t.H, t.TX
-        k["clear"](t.vis, t.lines, t.dirty, t.dirty_prev, H, W, TX, t.TX * t.TY, int(not t.mesh_clean))
+        self._frame(t.fbg, t.fdep, t.bgc, t.depth, t.vis, t.lines, t.dirty, t.dirty_prev, *cam, t.W, t.H,
+                    t.TX, t.TY, int(not t.mesh_clean))
         t.mesh_clean = True
-        if self.tri_count:
-            k["tris"](t.vis, t.dirty, *cam, W, H, TX)
-        if self.line_count:
-            k["lines"](t.lines, t.vis, t.depth, t.dirty, *cam, W, H, TX)
-        k["shade"](t.fbg, t.fdep, t.bgc, t.depth, t.vis, t.lines, t.dirty, t.dirty_prev, *cam,
-                   W, H, TX, t.TY)
 
 
 def _build(m: MeshLayer):
@@ -118,7 +109,7 @@ def _build(m: MeshLayer):
         w1 = ((a[0] - c[0]) * (sy - c[1]) - (a[1] - c[1]) * (sx - c[0])) / area
         return w0, w1, 1.0 - w0 - w1
 
-    @ti.kernel
+    @ti.func
     def normals():
         for v in range(nv):
             n = ti.Vector([0.0, 0.0, 0.0])
@@ -127,9 +118,9 @@ def _build(m: MeshLayer):
                 n += (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]])  # area-weighted
             N[v] = n / ti.max(n.norm(), 1e-12)
 
-    @ti.kernel
-    def clear(vis: ND_I64, lines: ND_I4, dirty: ND_I1, dirty_prev: ND_I1, H: ti.i32, W: ti.i32,
-              TX: ti.i32, T: ti.i32, whole: ti.i32):
+    @ti.func
+    def clear(vis: ti.template(), lines: ti.template(), dirty: ti.template(), dirty_prev: ti.template(),
+              H, W, TX, T, whole):
         """Empty the visibility and line buffers where the last frame wrote them (the tiles it
         marked dirty: nothing writes them elsewhere), or everywhere (``whole``: new buffers);
         those tiles become ``dirty_prev``, rewritten (restored) this frame too."""
@@ -143,9 +134,8 @@ def _build(m: MeshLayer):
             dirty_prev[t] = dirty[t]
             dirty[t] = 0
 
-    @ti.kernel
-    def tris(vis: ND_I64, dirty: ND_I1, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32,
-             H: ti.i32, TX: ti.i32):
+    @ti.func
+    def tris(vis: ti.template(), dirty: ti.template(), o, f, r, u, th, W, H, TX):
         for t in range(tri_count):
             i = tri_idx[t]
             a = project(P[i[0]], o, f, r, u, th, W, H)
@@ -175,9 +165,9 @@ def _build(m: MeshLayer):
             z = ti.bit_cast(ti.cast(k >> 32, ti.i32), ti.f32)
         return z
 
-    @ti.kernel
-    def lines_k(acc: ND_I4, vis: ND_I64, depth: ND_F, dirty: ND_I1, o: vec3, f: vec3, r: vec3,
-                u: vec3, th: ti.f32, W: ti.i32, H: ti.i32, TX: ti.i32):
+    @ti.func
+    def lines_k(acc: ti.template(), vis: ti.template(), depth: ti.template(), dirty: ti.template(), o, f,
+                r, u, th, W, H, TX):
         for k in range(line_count):
             ia, ib = line_idx[k][0], line_idx[k][1]
             a = project(P[ia], o, f, r, u, th, W, H)
@@ -203,10 +193,10 @@ def _build(m: MeshLayer):
                                     ti.atomic_add(acc[Y * W + X], v)  # integers: exact in any order
                                     dirty[(Y // TILE) * TX + X // TILE] = 1
 
-    @ti.kernel
-    def shade(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, vis: ND_I64, acc: ND_I4,
-              dirty: ND_I1, dirty_prev: ND_I1, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32,
-              W: ti.i32, H: ti.i32, TX: ti.i32, TY: ti.i32):
+    @ti.func
+    def shade(fbg: ti.template(), fdep: ti.template(), bgc: ti.template(), depth: ti.template(),
+              vis: ti.template(), acc: ti.template(), dirty: ti.template(), dirty_prev: ti.template(), o, f,
+              r, u, th, W, H, TX, TY):
         ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
         for t in range(TX * TY):
             if dirty[t] != 0 or dirty_prev[t] != 0:
@@ -248,4 +238,21 @@ def _build(m: MeshLayer):
                         fbg[k] = c4
                         fdep[k] = z
 
-    return dict(normals=normals, clear=clear, tris=tris, lines=lines_k, shade=shade)
+    @ti.kernel
+    def frame(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, vis: ND_I64, acc: ND_I4, dirty: ND_I1,
+              dirty_prev: ND_I1, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32, H: ti.i32,
+              TX: ti.i32, TY: ti.i32, whole: ti.i32):
+        """A frame's meshes in one launch: vertex normals, then the buffers cleared, the
+        triangles and lines rasterised and the touched tiles shaded — each a parallel loop at
+        the kernel's top level, run one after another (five launches were ~0.5 ms a frame
+        here, a launch costing ~0.1 ms whatever its work)."""
+        if ti.static(tri_count > 0):
+            normals()
+        clear(vis, acc, dirty, dirty_prev, H, W, TX, TX * TY, whole)
+        if ti.static(tri_count > 0):
+            tris(vis, dirty, o, f, r, u, th, W, H, TX)
+        if ti.static(line_count > 0):
+            lines_k(acc, vis, depth, dirty, o, f, r, u, th, W, H, TX)
+        shade(fbg, fdep, bgc, depth, vis, acc, dirty, dirty_prev, o, f, r, u, th, W, H, TX, TY)
+
+    return frame
