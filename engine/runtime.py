@@ -132,20 +132,24 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
                 ti.init(arch=ti.cpu, **kwargs)
     _state["arch"], _state["requested"] = _arch_in_use(), arch
     _own_thread()
-    _memoize_source_positions()
+    _quicken_front_end()
     if not _state.get("exit_hook"):
         atexit.register(_write_cache_at_exit)
         _state["exit_hook"] = True
     return _state["arch"]
 
 
-def _memoize_source_positions() -> None:
-    """Taichi formats a node's source position (file, line, the line with a caret under the
-    node, wrapped by ``textwrap``) for every node of every kernel it builds — also when the kernel
-    then comes from the offline cache, and again for a ``ti.func`` each time it is inlined: ~40,000
-    strings for sparks' first frame (kept, with the source lines below: warm start 3.5 → 2.9 s).
-    The string is a function of the node's place in its source, so it is kept and reused: the
-    same text, built once. (A private Taichi API: where it is not there, nothing is changed.)"""
+def _quicken_front_end() -> None:
+    """Taichi's front end runs on every kernel at every start, also when the kernel then comes
+    from the offline cache, and spends much of it on text only a failing kernel shows. Each
+    piece below gives the same text or answer as Taichi's own, sooner (tests/test_startup.py).
+    (Private Taichi APIs: where one is not there, it is left alone.)
+
+    Taichi formats a node's source position (file, line, the line with a caret under the node,
+    wrapped by ``textwrap``) for every node of every kernel it builds, and again for a ``ti.func``
+    each time it is inlined: ~40,000 strings for sparks' first frame (kept, with the source lines
+    below: warm start 3.5 → 2.9 s). The string is a function of the node's place in its source,
+    so it is kept and reused: the same text, built once."""
     try:
         from taichi.lang.ast import ast_transformer_utils as atu
 
@@ -174,9 +178,6 @@ def _memoize_source_positions() -> None:
     # for sparks' first frame, a third of them distinct): a line that fits comes back as it is
     if getattr(atu, "TextWrapper", None) is textwrap.TextWrapper:
         atu.TextWrapper = _QuickWrapper
-    # and each kernel or ti.func, as it is decorated, asks whether it is defined in a class by
-    # reading its frame's source line through ``inspect.getframeinfo``, whose file lookup scans
-    # every loaded module (~0.6 ms a decoration, ~0.1 s of a start): read the line directly
     try:
         from taichi.lang import kernel_impl
     except ImportError:  # pragma: no cover
@@ -188,6 +189,9 @@ def _memoize_source_positions() -> None:
         shim.__dict__.update(vars(textwrap))
         shim.fill = _quick_fill
         kernel_impl.textwrap = shim
+    # and each kernel or ti.func, as it is decorated, asks whether it is defined in a class by
+    # reading its frame's source line through ``inspect.getframeinfo``, whose file lookup scans
+    # every loaded module (~0.6 ms a decoration, ~0.1 s of a start): read the line directly
     taichis = getattr(kernel_impl, "_inside_class", None)
     if taichis not in (None, _inside_class) and hasattr(kernel_impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES"):
         _inside_class.taichis = taichis  # (kept for tests/test_startup.py)
@@ -262,7 +266,7 @@ def _memoized_by_function(look_up):
 # at import, not only at init: a kernel or ti.func at a module's top level is decorated (and asks
 # whether it is in a class) when that module is imported, often before init (the command line
 # imports the scene first)
-_memoize_source_positions()
+_quicken_front_end()
 
 
 def _write_cache_at_exit() -> None:
