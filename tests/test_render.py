@@ -72,8 +72,7 @@ def _compiled(renderer):
     """How many kernel instances the renderer's kernels have compiled so far."""
     kernels = [renderer._background, *renderer._k.values()]
     if renderer.has_particles:
-        kernels += [renderer._sprites, renderer._count, renderer._offsets, renderer._starts,
-                    renderer._scatter]
+        kernels += [renderer._sprites, renderer._tally, renderer._scatter]
     return sum(len(k._primal.compiled_kernels) for k in kernels)
 
 
