@@ -206,18 +206,20 @@ def _quicken_front_end() -> None:
 
 
 class _QuickWrapper(textwrap.TextWrapper):
-    """``textwrap.TextWrapper`` for Taichi's source-position text: the same lines, quicker. A
-    printable line that fits the width is one line as it is, less trailing spaces (none if it is
-    all spaces), which is what ``wrap`` returns for it (tests/test_startup.py compares the two);
-    a longer one is wrapped by ``TextWrapper`` once and kept (Taichi builds one per call)."""
+    """``textwrap.TextWrapper`` for Taichi's front end: the same lines, quicker. A printable line
+    that fits the width (less one trailing newline, as ``inspect.getsourcelines`` gives: wrapping
+    turns it into a trailing blank) is one line as it is, less trailing spaces, none if it is all
+    spaces — what ``wrap`` returns for it (tests/test_startup.py compares the two); any other
+    text is wrapped by ``TextWrapper`` once and kept (Taichi builds a wrapper per call)."""
 
     _kept: dict = {}
 
     def wrap(self, text):
-        if len(text) <= self.width and text.isprintable():
-            line = text.rstrip(" ")
+        body = text[:-1] if text.endswith("\n") else text
+        if len(text) <= self.width and body.isprintable():
+            line = body.rstrip(" ")
             return [line] if line else []
-        key = (self.width, text)
+        key = (self.width, self.tabsize, text)
         got = self._kept.get(key)
         if got is None:
             got = self._kept[key] = super().wrap(text)
@@ -225,12 +227,10 @@ class _QuickWrapper(textwrap.TextWrapper):
 
 
 def _quick_fill(text, width=70, **kwargs):
-    """``textwrap.fill``, quicker where it changes little: a printable line (less one trailing
-    newline, as ``inspect.getsourcelines`` gives) that fits the width comes back without its
-    trailing spaces and newline (tests/test_startup.py compares the two)."""
-    body = text[:-1] if text.endswith("\n") else text
-    if len(text) <= width and body.isprintable() and set(kwargs) <= {"tabsize"}:
-        return body.rstrip(" ")
+    """``textwrap.fill`` by ``_QuickWrapper`` (its options width and tabsize; any other goes to
+    ``textwrap.fill`` itself)."""
+    if set(kwargs) <= {"tabsize"}:
+        return "\n".join(_QuickWrapper(width=width, **kwargs).wrap(text))
     return textwrap.fill(text, width=width, **kwargs)
 
 

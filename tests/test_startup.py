@@ -126,7 +126,8 @@ def test_quick_wrapper_wraps_as_textwrap_does():
     assert sum(len(s) > 80 for s in lines) > 10 and sum(len(s) <= 80 for s in lines) > 100
     carets = [" " * k + "^" * m + " " * t for k in (0, 3, 8, 60) for m in (0, 1, 17, 40) for t in (0, 5)]
     odd = ["", " ", "    ", "\t", "\tx = 1", "x = 1\t", "a  b  ", "x" * 80, "x" * 81, "x " * 40,
-           " " * 79 + "^", " " * 81, "é" * 80, "a\u00a0b", "a\nb"]
+           " " * 79 + "^", " " * 81, "é" * 80, "a\u00a0b", "a\nb", "x = 1\n", "   \n", "\n",
+           "x" * 79 + "\n", "x" * 80 + "\n", "a \n\n"]
     for s in lines + carets + odd:
         assert quick.wrap(s) == ref.wrap(s), repr(s)
         assert quick.wrap(s) == ref.wrap(s), repr(s)  # a kept long line, the second time

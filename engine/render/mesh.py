@@ -244,8 +244,8 @@ def _build(m: MeshLayer):
               TX: ti.i32, TY: ti.i32, whole: ti.i32):
         """A frame's meshes in one launch: vertex normals, then the buffers cleared, the
         triangles and lines rasterised and the touched tiles shaded — each a parallel loop at
-        the kernel's top level, run one after another (five launches were ~0.5 ms a frame
-        here, a launch costing ~0.1 ms whatever its work)."""
+        the kernel's top level, run one after another (they were four or five launches, each
+        ~0.1 ms here whatever its work)."""
         if ti.static(tri_count > 0):
             normals()
         clear(vis, acc, dirty, dirty_prev, H, W, TX, TX * TY, whole)
