@@ -89,7 +89,9 @@ ALLOWED = {"_Kernels.__init__.<locals>.run_fixed": "engine.ode.solve: one ODE st
            # per frame, but short: level 2 of the grid's prefix scan over block totals (T/1024 adds)
            # and the births moved to free slots, one thread per emitter in plan order (only when a
            # ring's head meets live particles); on a GPU these want the binning's chunked scan
-           "HashGrid.build": "neighbour grid: level-2 scan of the block totals on one thread",
+           "HashGrid.rebuild": "neighbour grid: level-2 scan of the block totals on one thread",
+           "Interactions._pack_gravity": "direct pair gravity: the gravity slots' positions packed in "
+                                         "slot order on one thread (one pass before the N² gather)",
            "spawn_children": "sub-emitter children moved to free slots in rank order, one thread",
            "_build.<locals>.finish": "rigid XPBD: a substep's end and the next one's start, Gauss-Seidel",
            "_build.<locals>.whole": "rigid XPBD: a small scene's whole step on one thread",
@@ -113,7 +115,9 @@ def test_small_xpbd_groups_are_serial_on_the_cpu_only(monkeypatch):
 
 
 def kernels_in_source(root):
-    """(module path, qualified name, source) of every @ti.kernel function under ``root``."""
+    """(module path, qualified name, source) of every @ti.kernel and @ti.func function under
+    ``root`` (a func's top-level loops are its caller's top-level loops when it is called at a
+    kernel's top level, as the fused stages call theirs)."""
     out = []
     for path in glob.glob(os.path.join(root, "**", "*.py"), recursive=True):
         with open(path, encoding="utf-8") as fh:
@@ -126,7 +130,8 @@ def kernels_in_source(root):
                 if isinstance(child, (ast.FunctionDef, ast.ClassDef)):
                     q = f"{prefix}{child.name}"
                     if isinstance(child, ast.FunctionDef) and any(
-                            getattr(d, "attr", getattr(d, "id", "")) == "kernel" for d in child.decorator_list):
+                            getattr(d, "attr", getattr(d, "id", "")) in ("kernel", "func")
+                            for d in child.decorator_list):
                         out.append((path, q, ast.get_source_segment(src, child)))
                     inner = f"{q}.<locals>." if isinstance(child, ast.FunctionDef) else f"{q}."
                     stack.append((child, inner))

@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 import pytest
+import taichi as ti
 
 from runhelp import ENV, ROOT, same_bytes
 
@@ -249,7 +250,7 @@ def _lists_checked(cfg, frames=6):
 
     def check():
         if I.lists.stale[None]:
-            return  # (relisted before use)
+            I.relist()  # (what the sweep's or finish's kernel does first when the lists are stale)
         kind, x, cells = I.slot_kind.to_numpy(), I.state.particle_pos.to_numpy(), I.grid.slot_cell.to_numpy()
         nnbr, nbr = I.lists.count.to_numpy(), I.lists.nbr.to_numpy()
         members = np.flatnonzero(I.member.to_numpy())
@@ -291,6 +292,36 @@ def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
     I.lists.limit[None] = 3  # a member with more neighbours walks the grid
     I.relist()
     assert I.stats()["unlisted"] > 0 and (I.lists.count.to_numpy() == -1).any()
+
+
+def test_relisting_inside_a_kernel_happens_only_when_stale():
+    """``NeighbourLists.relist(..., only_stale=True)`` (what every sweep and the velocity pass run
+    first) leaves the lists alone while ``stale`` is clear, and lists exactly what ``build`` lists
+    when it is set, clearing it."""
+    cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0},
+           "emitters": [dict(_SAND, bursts=[{"time": 0.0, "count": 200}])], "colliders": _FLOOR}
+    sc = _scene(cfg)
+    _run(sc, 3)
+    I = sc.particles.interact
+    L = I.lists
+
+    @ti.kernel
+    def relist_if_stale(L: ti.template(), member: ti.template(), kind: ti.template()):
+        L.relist(member, kind, True)
+
+    I.relist()
+    count, nbr = L.count.to_numpy(), L.nbr.to_numpy()
+    assert (count > 0).sum() > 50
+    L.count.fill(0)
+    L.stale[None] = 0
+    relist_if_stale(L, I.member, I.slot_kind)
+    assert (L.count.to_numpy() == 0).all()  # not stale: nothing listed
+    L.stale[None] = 1
+    relist_if_stale(L, I.member, I.slot_kind)
+    assert L.stale[None] == 0
+    assert np.array_equal(L.count.to_numpy(), count)
+    for i in np.flatnonzero(count > 0):
+        assert np.array_equal(L.nbr.to_numpy()[i, :count[i]], nbr[i, :count[i]])
 
 
 @pytest.mark.slow  # (default run kept under 5 minutes cold; the lists' test above runs by default)

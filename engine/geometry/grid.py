@@ -103,6 +103,12 @@ class HashGrid:
     @ti.kernel
     def build(self, pos: ti.template(), member: ti.template()):
         """Rebuild from the slots with ``member[i] != 0`` at positions ``pos`` (vec3 f32, m)."""
+        self.rebuild(pos, member)
+
+    @ti.func
+    def rebuild(self, pos: ti.template(), member: ti.template()):
+        """``build``'s loops, for a caller's kernel to run among its own (each stays a parallel
+        loop at that kernel's top level: call it there, never inside a loop or a branch)."""
         for b in range(self.table):
             self.count[b] = 0
             self.fill[b] = 0
@@ -180,7 +186,7 @@ class NeighbourLists:
     Fields: ``nbr`` (i32, capacity × (NEIGHBOURS + 1): slot i's list is ``nbr[i, :count[i]]``,
     what lies past it is scratch), ``count`` (i32: listed; −1: walks the grid), ``x_ref`` (where
     each member was listed), ``sorted_x``/``sorted_kind``/``sorted_cell`` (the listing's copies of
-    the grid's members in its sorted order), ``stale``, ``unlisted``, ``limit`` (i32 scalars;
+    the grid's members in its sorted order), ``stale``, ``go``, ``unlisted``, ``limit`` (i32 scalars;
     ``limit`` is NEIGHBOURS, lower in tests to force the walk)."""
 
     SKIN = 0.2  # the default skin, a fraction of a cell
@@ -197,6 +203,7 @@ class NeighbourLists:
         self.count = ti.field(ti.i32, shape=n)
         self.x_ref = ti.Vector.field(3, ti.f32, shape=n)
         self.stale = ti.field(ti.i32, shape=())
+        self.go = ti.field(ti.i32, shape=())  # (relist's decision, read by its loops)
         self.unlisted = ti.field(ti.i32, shape=())
         self.limit = ti.field(ti.i32, shape=())
         self.limit[None] = NEIGHBOURS
@@ -212,39 +219,63 @@ class NeighbourLists:
 
     @ti.kernel
     def build(self, member: ti.template(), kind: ti.template()):
+        """List every member's neighbours (at the positions now)."""
+        self.relist(member, kind, False)
+
+    @ti.func
+    def relist(self, member: ti.template(), kind: ti.template(), only_stale: ti.template()):
+        """``build``'s loops, for a caller's kernel to run among its own (call it at that
+        kernel's top level: each loop stays parallel there). ``only_stale``: list only if
+        ``stale`` is set (the test made on the device, so a solver's sweep can carry its own
+        relisting: no read-back and no extra launch between sweeps)."""
         G = self.grid
-        self.stale[None] = 0
-        self.unlisted[None] = 0
-        for k in range(G.members[None]):
+        go = 1
+        if ti.static(only_stale):
+            go = self.stale[None]
+        self.go[None] = go
+        if go != 0:
+            self.stale[None] = 0
+            self.unlisted[None] = 0
+        # (each loop's range is empty when not listing: an empty parallel loop costs ~12 µs
+        # here, one that tests a flag per item ~17 µs)
+        for k in range(G.members[None] * self.go[None]):
             j = G.sorted[k]
             self.sorted_x[k] = self.pos[j]
             self.sorted_kind[k] = kind[j]
             self.sorted_cell[k] = G.slot_cell[j]
-        for i in range(G.lo, G.hi):
+        for i in range(G.lo, G.lo + (G.hi - G.lo) * self.go[None]):  # slots outside the grid:
+            if member[i] == 0 or G.slot_bucket[i] < 0:  # nothing listed
+                if member[i] != 0:
+                    self.x_ref[i] = self.pos[i]
+                self.count[i] = 0
+        # the members in the grid's order (bucket, then slot): a cell's members one after another,
+        # so their 27 cells' candidates are still in cache for the next (water's listing 2.1 →
+        # 1.8 ms, the same lists)
+        for q in range(G.members[None] * self.go[None]):
+            i = G.sorted[q]
             m = 0
-            if member[i] != 0:
-                xi = self.pos[i]
-                self.x_ref[i] = xi
-                want, c = kind[i], G.slot_cell[i]
-                # the grid's walk (HashGrid.for_neighbours: the 27 cells in its order, each
-                # bucket's slots of that cell and kind, by slot) over the sorted copies
-                # without a branch per candidate: each is written at place m (the spare column
-                # past the list's end once it is full) and kept by counting it — about a quarter
-                # of the candidates are kept, so a branch on it mispredicts often (water's
-                # listing: 3.1 → 1.7 ms)
-                for n in range(27):
-                    cc = G.neighbour_cell(c, n)
-                    b = G.bucket(cc)
-                    for k in range(G.start[b], G.start[b + 1]):
-                        r = xi - self.sorted_x[k]
-                        j = G.sorted[k]
-                        keep = (self.sorted_kind[k] == want) & (self.sorted_cell[k] == cc).all() \
-                            & (r.dot(r) < self.reach2) & (j != i)
-                        self.nbr[i, ti.min(m, NEIGHBOURS)] = j
-                        m += ti.cast(keep, ti.i32)
-                if m > self.limit[None]:
-                    m = -1
-                    ti.atomic_add(self.unlisted[None], 1)  # (an integer count: the same in any order)
+            xi = self.sorted_x[q]
+            self.x_ref[i] = xi
+            want, c = self.sorted_kind[q], self.sorted_cell[q]
+            # the grid's walk (HashGrid.for_neighbours: the 27 cells in its order, each
+            # bucket's slots of that cell and kind, by slot) over the sorted copies
+            # without a branch per candidate: each is written at place m (the spare column
+            # past the list's end once it is full) and kept by counting it — about a quarter
+            # of the candidates are kept, so a branch on it mispredicts often (water's
+            # listing: 3.1 → 1.7 ms)
+            for n in range(27):
+                cc = G.neighbour_cell(c, n)
+                b = G.bucket(cc)
+                for k in range(G.start[b], G.start[b + 1]):
+                    r = xi - self.sorted_x[k]
+                    j = G.sorted[k]
+                    keep = (self.sorted_kind[k] == want) & (self.sorted_cell[k] == cc).all() \
+                        & (r.dot(r) < self.reach2) & (j != i)
+                    self.nbr[i, ti.min(m, NEIGHBOURS)] = j
+                    m += ti.cast(keep, ti.i32)
+            if m > self.limit[None]:
+                m = -1
+                ti.atomic_add(self.unlisted[None], 1)  # (an integer count: the same in any order)
             self.count[i] = m
 
     @ti.func

@@ -138,22 +138,22 @@ class Interactions(FluidTerms):
         # NEIGHBOURS and its sweeps tripled
         skin = NeighbourLists.SKIN if self.fluid else GRAIN_SKIN
         self.lists = NeighbourLists(self.grid, state.particle_pos, skin) if self.grid is not None else None
+        self.listed = self.lists is not None  # (a compile-time switch)
 
     # -- per-step entry --------------------------------------------------------------------------
     def step(self, h: float) -> None:
         """Interact over the step of h just taken (positions and velocities at its end)."""
-        self.prepare()
+        # (a kernel a stage: the grid, the lists and the test for stale lists live in them, so a
+        # step takes 2 + iterations launches and reads nothing back; it took 5 + 2·iterations,
+        # one more a relisting, iterations + 1 of them reads of ``stale``)
+        if self.grid is not None:
+            self.begin()
+        else:
+            self.prepare()
         if self.mesh:
             self._mesh_gravity()
-        if self.grid is not None:
-            self.grid.build(self.state.particle_pos, self.member)
-            self.relist()
-            for _ in range(self.iterations):
-                if self.lists.stale[None]:
-                    self.relist()
-                self.sweep(h)
-            if self.lists.stale[None]:
-                self.relist()
+        for _ in range(self.iterations if self.grid is not None else 0):
+            self.sweep(h)
         self.finish(h)
 
     def _mesh_gravity(self) -> None:
@@ -180,6 +180,18 @@ class Interactions(FluidTerms):
     # -- kernels ---------------------------------------------------------------------------------
     @ti.kernel
     def prepare(self):
+        """Each slot's kind and membership; the step's end (x_pre, v_pre); no correction yet."""
+        self._prepare()
+
+    @ti.kernel
+    def begin(self):
+        """``prepare``, the grid rebuilt from the members and their neighbours listed."""
+        self._prepare()
+        self.grid.rebuild(self.state.particle_pos, self.member)
+        self.lists.relist(self.member, self.slot_kind, False)
+
+    @ti.func
+    def _prepare(self):
         S = self.state
         for i in range(self.lo, self.hi):
             k = 0
@@ -239,8 +251,10 @@ class Interactions(FluidTerms):
 
     @ti.kernel
     def sweep(self, h: ti.f32):
-        """One Jacobi sweep: every member's Δx from its neighbours' positions, then applied."""
+        """One Jacobi sweep: every member's Δx from its neighbours' positions, then applied
+        (after listing them again if a member has moved too far since: ``lists.stale``)."""
         S = self.state
+        self.lists.relist(self.member, self.slot_kind, True)
         if ti.static(self.fluid):
             for i in range(self.lo, self.hi):
                 if self.slot_kind[i] == 2:
@@ -301,6 +315,8 @@ class Interactions(FluidTerms):
         """Velocities from the corrections, the fluid's velocity terms, gravity's kick, then every
         member projected onto the colliders (x_pre, v_pre: the step's end before the solve)."""
         S = self.state
+        if ti.static(self.listed):  # (the velocity gathers read the lists: fresh ones)
+            self.lists.relist(self.member, self.slot_kind, True)
         for i in range(self.lo, self.hi):
             if self.member[i] != 0:
                 v = S.particle_vel[i] + self.corr[i] / h
