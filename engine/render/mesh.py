@@ -60,6 +60,9 @@ class MeshLayer:
                                for d, k in zip(self.draws, nv)]) if self.nv else np.zeros((1, 3), np.float32)
         self.mesh_col.from_numpy(np.ascontiguousarray(cols[:n], np.float32))
         self.tri_idx = ti.Vector.field(3, ti.i32, shape=max(1, self.tri_count))
+        # each triangle's corners on screen this frame (x, y px; z m), as the rasteriser projected
+        # them: the shading reads them back instead of projecting three vertices per pixel
+        self.tri_scr = ti.Vector.field(3, ti.f32, shape=(max(1, self.tri_count), 3))
         self.line_idx = ti.Vector.field(2, ti.i32, shape=max(1, self.line_count))
         if self.tri_count:
             self.tri_idx.from_numpy(self.tris)
@@ -90,7 +93,7 @@ class MeshLayer:
 
 def _build(m: MeshLayer):
     P, N, C = m.mesh_pos, m.mesh_nrm, m.mesh_col
-    tri_idx, line_idx = m.tri_idx, m.line_idx
+    tri_idx, line_idx, tri_scr = m.tri_idx, m.line_idx, m.tri_scr
     tri_count, line_count, nv = m.tri_count, m.line_count, max(1, m.nv)
     adj_tri = getattr(m, "adj_tri", None)
     adj_start = getattr(m, "adj_start", None)
@@ -130,7 +133,8 @@ def _build(m: MeshLayer):
                 for py in range(py0, ti.min(H, py0 + TILE)):
                     for k in range(py * W + px0, py * W + ti.min(W, px0 + TILE)):
                         vis[k] = ti.i64(EMPTY)
-                        lines[k] = ti.Vector([0, 0, 0, 0])
+                        if ti.static(line_count > 0):  # (nothing reads the line sums otherwise)
+                            lines[k] = ti.Vector([0, 0, 0, 0])
             dirty_prev[t] = dirty[t]
             dirty[t] = 0
 
@@ -142,6 +146,7 @@ def _build(m: MeshLayer):
             b = project(P[i[1]], o, f, r, u, th, W, H)
             c = project(P[i[2]], o, f, r, u, th, W, H)
             area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+            tri_scr[t, 0], tri_scr[t, 1], tri_scr[t, 2] = a, b, c
             if a[2] > NEAR and b[2] > NEAR and c[2] > NEAR and ti.abs(area) > 1e-9:
                 x0 = ti.max(0, ti.cast(ti.floor(ti.min(a[0], b[0], c[0])), ti.i32))
                 x1 = ti.min(W - 1, ti.cast(ti.floor(ti.max(a[0], b[0], c[0])), ti.i32))
@@ -210,10 +215,9 @@ def _build(m: MeshLayer):
                         if ti.static(tri_count > 0):
                             if zt < z:
                                 key = vis[k]
-                                i = tri_idx[ti.cast(key - ((key >> 32) << 32), ti.i32)]
-                                a = project(P[i[0]], o, f, r, u, th, W, H)
-                                b = project(P[i[1]], o, f, r, u, th, W, H)
-                                c = project(P[i[2]], o, f, r, u, th, W, H)
+                                tt = ti.cast(key - ((key >> 32) << 32), ti.i32)
+                                i = tri_idx[tt]
+                                a, b, c = tri_scr[tt, 0], tri_scr[tt, 1], tri_scr[tt, 2]
                                 w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
                                 w0, w1, w2 = w0 / a[2], w1 / b[2], w2 / c[2]
                                 iz = 1.0 / (w0 + w1 + w2)
