@@ -132,8 +132,11 @@ def _build(m: MeshLayer):
                 px0, py0 = (t % TX) * TILE, (t // TX) * TILE
                 for py in range(py0, ti.min(H, py0 + TILE)):
                     for k in range(py * W + px0, py * W + ti.min(W, px0 + TILE)):
-                        vis[k] = ti.i64(EMPTY)
-                        if ti.static(line_count > 0):  # (nothing reads the line sums otherwise)
+                        # (each buffer only where something reads it: a scene of lines alone
+                        # never reads the visibility buffer, one of triangles alone the sums)
+                        if ti.static(tri_count > 0):
+                            vis[k] = ti.i64(EMPTY)
+                        if ti.static(line_count > 0):
                             lines[k] = ti.Vector([0, 0, 0, 0])
             dirty_prev[t] = dirty[t]
             dirty[t] = 0
@@ -190,7 +193,10 @@ def _build(m: MeshLayer):
                         for dx in ti.static(range(2)):
                             X, Y = ix + dx, iy + dy
                             if 0 <= X < W and 0 <= Y < H:
-                                if q[2] < ti.min(depth[Y * W + X], tri_depth(vis, Y * W + X)) + 0.02:
+                                zt = 1e30
+                                if ti.static(tri_count > 0):
+                                    zt = tri_depth(vis, Y * W + X)
+                                if q[2] < ti.min(depth[Y * W + X], zt) + 0.02:
                                     w = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
                                     tau = -ti.log(1.0 - ti.min(0.999, 1.6 * w))
                                     v = ti.cast(ti.Vector([tau, tau * col[0], tau * col[1],
@@ -211,8 +217,8 @@ def _build(m: MeshLayer):
                         k = py * W + px
                         c4 = bgc[k]
                         z = depth[k]
-                        zt = tri_depth(vis, k)
                         if ti.static(tri_count > 0):
+                            zt = tri_depth(vis, k)
                             if zt < z:
                                 key = vis[k]
                                 tt = ti.cast(key - ((key >> 32) << 32), ti.i32)
