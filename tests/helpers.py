@@ -63,3 +63,16 @@ def one_line(e):
     text = str(e.value)
     assert "\n" not in text and len(text) < 400, text
     return text
+
+
+def sim_scene(cfg):
+    """A scene from a config (dict or path) that only steps: no renderer."""
+    from engine.config.load import load_config
+    from engine.scene import Scene
+
+    return Scene(load_config(cfg), render=False)
+
+
+def run_frames(scene, frames: int) -> None:
+    for _ in range(frames):
+        scene.advance_frame()

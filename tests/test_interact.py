@@ -1,7 +1,7 @@
-"""Particles that interact (issue 23): the neighbour grid and the interaction kinds against closed
-forms — a two-body circular orbit's period, momentum kept by pair forces, grains that do not
-overlap, a settled fluid column's height, a steeper pile for more friction — byte-identical
-frames on 1 and 2 threads, no grid in a scene without interactions, and one-line bad input."""
+"""Particles that interact (issue 23): the interaction kinds against closed forms — a two-body
+circular orbit's period, momentum kept by pair forces, grains that do not overlap, a settled fluid
+column's height, a steeper pile for more friction — byte-identical frames on 1 and 2 threads, and
+one-line bad input. The neighbour grid and lists they stand on: tests/test_neighbours.py."""
 import copy
 import math
 import os
@@ -10,64 +10,12 @@ import sys
 
 import numpy as np
 import pytest
-import taichi as ti
 
+from helpers import run_frames, sim_scene
 from runhelp import ENV, ROOT, same_bytes
 
 from engine.config.load import ConfigError, load_config
-from engine.geometry.grid import NeighbourLists
 from engine.geometry.sizing import table_size
-from engine.particles.interact import GRAIN_SKIN
-
-
-def _scene(cfg):
-    from engine.scene import Scene
-
-    return Scene(load_config(cfg), render=False)
-
-
-def _run(sc, frames):
-    for _ in range(frames):
-        sc.advance_frame()
-
-
-# -- the grid ----------------------------------------------------------------------------------
-def test_grid_sorted_by_slot_within_buckets_and_complete():
-    """Every member lands in the bucket of its cell exactly once, non-members nowhere, and each
-    bucket's slots are in increasing slot order (the stable order frames depend on); 100 points
-    beyond the 30-bit cell range are counted as ungridded, not dropped silently."""
-    import taichi as ti
-
-    from engine import runtime
-    from engine.geometry.grid import HashGrid
-
-    runtime.ensure_init()
-    n = 3000
-    rng = np.random.default_rng(1)
-    p = (rng.random((n, 3)) * 3 - 1.5).astype(np.float32)
-    p[:100] = 1e9  # 1e9 m / 0.05 m per cell ≫ 2^30 cells
-    member = (rng.random(n) < 0.7).astype(np.int32)
-    pos, mem = ti.Vector.field(3, ti.f32, n), ti.field(ti.i32, n)
-    pos.from_numpy(p)
-    mem.from_numpy(member)
-    g = HashGrid(n, 0.05)
-    g.build(pos, mem)
-    st = g.stats()
-    far = int(member[:100].sum())
-    assert st["ungridded"] == far
-    start, order = g.start.to_numpy(), g.sorted.to_numpy()
-    members = order[:start[-1]]
-    expect = np.nonzero(member)[0]
-    expect = expect[expect >= 100]
-    assert sorted(members.tolist()) == expect.tolist()
-    bucket = g.slot_bucket.to_numpy()
-    cells = np.floor(p / np.float32(0.05)).astype(np.int64)
-    for b in np.unique(bucket[expect]):
-        seg = order[start[b]:start[b + 1]]
-        assert (np.diff(seg) > 0).all()
-        assert (bucket[seg] == b).all()
-    assert (g.slot_cell.to_numpy()[expect] == cells[expect]).all()
-    assert st["max_bucket"] == np.bincount(bucket[expect]).max()
 
 
 # -- gravity -------------------------------------------------------------------------------------
@@ -87,7 +35,7 @@ def test_two_body_circular_orbit_period():
     integrator's drift (a symplectic split), in float32: the measured period is within 0.5 % at
     h = 1/400 (about 2,500 steps an orbit; the split's phase error is O(h), f32 rounding of the
     angle ~1e-6), and the separation stays within 1 % of d (a circular orbit stays circular)."""
-    sc = _scene(_binary(1.0 / 400.0))
+    sc = sim_scene(_binary(1.0 / 400.0))
     angles, seps, times = [], [], []
     for f in range(720):
         sc.advance_frame()
@@ -117,10 +65,10 @@ def test_pair_gravity_conserves_momentum():
                          "bursts": [{"time": 0.0, "count": 300}], "lifetime": 100.0,
                          "interact": {"kind": "gravity", "radius": 0.01, "G": 1.0, "mass": 0.001,
                                       "softening": 0.03}}]}
-    sc = _scene(cfg)
+    sc = sim_scene(cfg)
     sc.advance_frame()
     v0 = sc.velocities().astype(np.float64)
-    _run(sc, 19)
+    run_frames(sc, 19)
     v1 = sc.velocities().astype(np.float64)
     moved = np.abs(v1 - v0).sum()
     assert moved > 1.0  # the stars really pulled on one another
@@ -154,11 +102,11 @@ def test_a_cluster_past_the_direct_limit_runs_on_the_mesh_and_keeps_momentum():
                          "bursts": [{"time": 0.0, "count": 25_000}], "lifetime": 100.0, "capacity": 25_000,
                          "interact": {"kind": "gravity", "radius": 0.01, "G": 1.0, "mass": 4e-5,
                                       "softening": 0.05}}]}
-    sc = _scene(cfg)
+    sc = sim_scene(cfg)
     assert sc.particles.interact.mesh
     sc.advance_frame()
     v0 = sc.velocities().astype(np.float64)
-    _run(sc, 9)
+    run_frames(sc, 9)
     v1 = sc.velocities().astype(np.float64)
     assert len(v1) == 25_000
     moved = np.abs(v1 - v0).sum()
@@ -191,10 +139,10 @@ def _heights(sc):
 def test_grains_do_not_overlap():
     """Settled grains (a 1.5 s pour of 240 grains) overlap by at most 10 % of their radius
     (closest centres ≥ 2r − 0.1 r): the sweeps and the colliders as constraints resolve contact."""
-    sc = _scene(_pour(0.8, rate=300.0, stop=0.8, frames=45))
+    sc = sim_scene(_pour(0.8, rate=300.0, stop=0.8, frames=45))
     from scipy.spatial import cKDTree
 
-    _run(sc, 45)
+    run_frames(sc, 45)
     x = sc.positions()
     assert len(x) >= 200
     r = 0.02
@@ -211,13 +159,13 @@ def test_grains_between_other_emitters_interact_over_their_own_ring_only():
     grains = data["emitters"][0]
     plain = {"name": "dust", "position": [1.5, 0.5, 0.0], "rate": 4000.0, "lifetime": 0.5, "speed": [0.5, 1.0]}
     data["emitters"] = [plain, grains, dict(plain, name="more_dust")]
-    sc = _scene(data)
+    sc = sim_scene(data)
     I, layout = sc.particles.interact, sc.particles.layout
     assert (I.lo, I.hi) == (layout.starts[1], layout.starts[1] + layout.sizes[1]) and I.lo > 0 and I.hi < I.cap
     assert I.grid.table == table_size(I.hi - I.lo) < table_size(I.cap)  # sized for the ring, not the pool
     from scipy.spatial import cKDTree
 
-    _run(sc, 45)
+    run_frames(sc, 45)
     alive = sc.particles.state.particle_alive.to_numpy()[I.lo:I.hi] != 0
     x = sc.particles.state.particle_pos.to_numpy()[I.lo:I.hi][alive]
     assert len(x) >= 200
@@ -232,111 +180,14 @@ def test_more_friction_builds_a_steeper_pile():
     atan μ: point grains roll freely)."""
     slopes = []
     for mu in (0.1, 1.0):
-        sc = _scene(_pour(mu, rate=400.0, stop=2.0, frames=90))
-        _run(sc, 90)
+        sc = sim_scene(_pour(mu, rate=400.0, stop=2.0, frames=90))
+        run_frames(sc, 90)
         _, top, base = _heights(sc)
         slopes.append(top / base)
     assert slopes[1] > 1.25 * slopes[0], slopes
 
 
 # -- fluid ---------------------------------------------------------------------------------------
-def _lists_checked(cfg, frames=6):
-    """Run cfg, checking before each sweep and velocity pass that every member's list holds every
-    slot of the grid walk's 27 cells closer than the kinds' largest cut-off (so each gather gets
-    the walk's terms); returns the scene's interactions and the member counts checked."""
-    sc = _scene(cfg)
-    I = sc.particles.interact
-    checked = []
-
-    def check():
-        if I.lists.stale[None]:
-            I.relist()  # (what the sweep's or finish's kernel does first when the lists are stale)
-        kind, x, cells = I.slot_kind.to_numpy(), I.state.particle_pos.to_numpy(), I.grid.slot_cell.to_numpy()
-        nnbr, nbr = I.lists.count.to_numpy(), I.lists.nbr.to_numpy()
-        members = np.flatnonzero(I.member.to_numpy())
-        for i in members:
-            same = members[(kind[members] == kind[i]) & (members != i)]
-            walk = same[(np.abs(cells[same] - cells[i]) <= 1).all(1)]
-            near = set(walk[((x[walk] - x[i]) ** 2).sum(1) < I.grid.cell ** 2].tolist())
-            assert nnbr[i] == -1 or near <= set(nbr[i, : nnbr[i]].tolist()), i
-        checked.append(len(members))
-
-    for name in ("sweep", "finish"):
-        inner = getattr(I, name)
-        setattr(I, name, lambda h, inner=inner: (check(), inner(h))[1])
-    _run(sc, frames)
-    return I, checked
-
-
-_SAND = {"name": "sand", "shape": "box", "position": [0.6, 0.4, 0.0], "box_size": [0.2, 0.2, 0.2],
-         "speed": [0.0, 0.5], "bursts": [{"time": 0.0, "count": 300}], "lifetime": 100.0,
-         "interact": {"kind": "granular", "radius": 0.015, "friction": 0.5}}
-_FLOOR = [{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "restitution": 0.0}]
-
-
-def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
-    """Each member's neighbours are listed once a step and reused by every sweep and the velocity
-    pass while no member has moved past half the skin: checked before each use, in a pouring
-    fluid and in grains falling onto a floor, and a member whose neighbours overflow the list
-    walks the grid instead (counted)."""
-    s = 0.04
-    cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0, "impacts": "projected"},
-           "emitters": [{"name": "water", "shape": "box", "position": [0.0, 0.3, 0.0], "box_size": [0.3, 0.3, 0.3],
-                         "speed": [0.0, 0.5], "bursts": [{"time": 0.0, "count": 400}], "lifetime": 100.0,
-                         "interact": {"kind": "fluid", "radius": s / 2, "iterations": 4}}, _SAND],
-           "colliders": _FLOOR}
-    I, checked = _lists_checked(cfg)
-    assert I.lists.skin == NeighbourLists.SKIN  # a fluid's narrow skin
-    assert len(checked) >= 6 * 4 * 5 and min(checked) > 0
-    assert I.stats()["unlisted"] == 0
-    I.lists.limit[None] = 3  # a member with more neighbours walks the grid
-    I.relist()
-    assert I.stats()["unlisted"] > 0 and (I.lists.count.to_numpy() == -1).any()
-
-
-def test_relisting_inside_a_kernel_happens_only_when_stale():
-    """``NeighbourLists.relist(..., only_stale=True)`` (what every sweep and the velocity pass run
-    first) leaves the lists alone while ``stale`` is clear, and lists exactly what ``build`` lists
-    when it is set, clearing it."""
-    cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0},
-           "emitters": [dict(_SAND, bursts=[{"time": 0.0, "count": 200}])], "colliders": _FLOOR}
-    sc = _scene(cfg)
-    _run(sc, 3)
-    I = sc.particles.interact
-    L = I.lists
-
-    @ti.kernel
-    def relist_if_stale(L: ti.template(), member: ti.template(), kind: ti.template()):
-        L.relist(member, kind, True)
-
-    I.relist()
-    count, nbr = L.count.to_numpy(), L.nbr.to_numpy()
-    assert (count > 0).sum() > 50
-    L.count.fill(0)
-    L.stale[None] = 0
-    relist_if_stale(L, I.member, I.slot_kind)
-    assert (L.count.to_numpy() == 0).all()  # not stale: nothing listed
-    L.stale[None] = 1
-    relist_if_stale(L, I.member, I.slot_kind)
-    assert L.stale[None] == 0
-    assert np.array_equal(L.count.to_numpy(), count)
-    for i in np.flatnonzero(count > 0):
-        assert np.array_equal(L.nbr.to_numpy()[i, :count[i]], nbr[i, :count[i]])
-
-
-@pytest.mark.slow  # (default run kept under 5 minutes cold; the lists' test above runs by default)
-def test_grains_wide_skin_lists_hold_every_neighbour_too():
-    """Grains alone take the wide skin (GRAIN_SKIN: fewer relistings in a pour); their lists hold
-    every neighbour of the walk before each use all the same, as they fall and pile."""
-    sand = dict(_SAND, speed=[0.0, 3.0], position=[0.6, 0.15, 0.0])  # fast, low: they meet and pile
-    cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0, "impacts": "projected"}, "emitters": [sand],
-           "colliders": _FLOOR}
-    I, checked = _lists_checked(cfg, frames=12)
-    assert I.lists.skin == GRAIN_SKIN > NeighbourLists.SKIN
-    assert len(checked) >= 12 * 4 * 2 and min(checked) > 0
-    assert I.stats()["unlisted"] == 0
-
-
 def test_settled_fluid_column_height():
     """N = 500 fluid particles at rest spacing s = 0.04 m in a 0.4 × 0.4 m tank fill it to
     H = N s³ / A = 0.2 m. Measured as the 99th height percentile plus s (bottom centres rest on
@@ -353,8 +204,8 @@ def test_settled_fluid_column_height():
                          "speed": [0.0, 0.0], "bursts": [{"time": 0.0, "count": n}], "lifetime": 100.0,
                          "interact": {"kind": "fluid", "radius": s / 2, "iterations": 4}}],
            "colliders": walls}
-    sc = _scene(cfg)
-    _run(sc, 45)
+    sc = sim_scene(cfg)
+    run_frames(sc, 45)
     x = sc.positions()
     H = n * s ** 3 / (w * w)
     got = float(np.percentile(x[:, 1], 99)) + s
@@ -379,17 +230,6 @@ def test_frames_identical_on_one_and_two_threads(tmp_path):
         assert r.returncode == 0, r.stderr
         outs.append(out)
     assert same_bytes(outs[0], outs[1]) >= 10
-
-
-def test_no_grid_without_interact():
-    """A scene without `interact` builds no grid (so compiles none of its kernels) and allocates
-    no interaction fields."""
-    from engine.geometry.grid import HashGrid
-
-    before = HashGrid.built
-    sc = _scene(os.path.join(ROOT, "configs", "dust.toml"))
-    assert sc.particles.interact is None
-    assert HashGrid.built == before
 
 
 # -- bad input -----------------------------------------------------------------------------------
@@ -450,8 +290,8 @@ def _crumple(self_collision):
                        "self_collision": self_collision}],
            "colliders": [{"type": "plane", "restitution": 0.0, "friction": 0.6},
                          {"type": "sphere", "center": [0.0, 0.25, 0.0], "radius": 0.08, "restitution": 0.0}]}
-    sc = _scene(cfg)
-    _run(sc, 45)
+    sc = sim_scene(cfg)
+    run_frames(sc, 45)
     b = sc.bodies[0]
     x = b.positions()
     joined = set(zip(b.system.model.spring_a.to_numpy().tolist(), b.system.model.spring_b.to_numpy().tolist()))
