@@ -27,7 +27,7 @@ from .binning import build_binning_kernels, chunks_for
 from .composite import build_composite_kernels
 from .resolution import CO_MIN_TEXELS, LO_MIN_TEXELS, particle_scale
 from .sprites import TILE, Look, SpriteRecords, build_sprite_kernel
-from .targets import FrameTargets, packed_view
+from .targets import FrameTargets, packed_view, wide_view
 
 SCHEDULES = ("tiles", "pixels")
 MAX_SIZES_KEPT = 4  # image sizes whose buffers a Renderer keeps (least recently used dropped)
@@ -166,10 +166,10 @@ class Renderer:
             if t.mesh:
                 copy_background(t.fbg, t.fdep, t.bgc, t.depth, W, *rect)
         if (exposure, mode) != t.packed_key:
-            self._k["pack_background"](t.bgc, t.bg_packed, W, 0, 0, W, H, exposure, mode)
+            self._k["pack_background"](t.bgc, t.bg_packed, W, H, 0, 0, W, H, exposure, mode)
             t.packed_key = (exposure, mode)
         elif rect is not None:
-            self._k["pack_background"](t.bgc, t.bg_packed, W, *rect, exposure, mode)
+            self._k["pack_background"](t.bgc, t.bg_packed, W, H, *rect, exposure, mode)
         bgc, dep = t.bgc, t.depth
         if self.mesh is not None:
             self.mesh.update()
@@ -195,7 +195,7 @@ class Renderer:
                 ex0, ey0 = rect[0] // TILE - 1, rect[1] // TILE - 1
                 ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
             self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, bgc, dep, t.bg_packed,
-                                       packed, t.dirty, t.dirty_prev if t.mesh else t.dirty,
+                                       packed, *wide_view(image), t.dirty, t.dirty_prev if t.mesh else t.dirty,
                                        t.touched_lo, t.edges, ex0, ey0, ex1, ey1, *common)
         else:
             self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,

@@ -3,8 +3,8 @@ arguments, so a new render size allocates arrays and compiles nothing (fields pa
 ``ti.template()`` would re-specialise every kernel).
 
 Per pixel (H·W,), flat in row-major order: ``bgc`` vec4 (background RGB, coverage 0) and ``depth`` f32 (m) — kept while the
-camera, colliders and size stay; ``bg_packed`` u32, the background tone-mapped (what an untouched
-tile copies). The splat arrays hold the full level's W·H pixels, then the reduced level's
+camera, colliders and size stay; ``bg_packed`` ((H·W + 1) // 2,) u64, the background tone-mapped,
+two pixels to an element (what an untouched tile copies). The splat arrays hold the full level's W·H pixels, then the reduced level's
 Wl·Hl texels (Hl, Wl = ceil(scale · (H, W))), then the coarse level's Wc·Hc texels (at half the
 reduced scale; engine.render.composite): ``depth`` (the reduced parts: the farthest depth under
 each texel), ``accA``/``accB`` vec4 splat accumulators (engine.render.splat), written only in tiles
@@ -20,6 +20,7 @@ which tiles' upsample is bilateral somewhere (engine.render.composite).
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import taichi as ti
@@ -62,7 +63,7 @@ class FrameTargets:
         both = self.LC + self.Wc * self.Hc  # splat arrays: every level (1×1 ones unused)
         self.bgc = ti.ndarray(vec4, shape=px)
         self.depth = ti.ndarray(ti.f32, shape=both)
-        self.bg_packed = ti.ndarray(ti.u32, shape=px)
+        self.bg_packed = ti.ndarray(ti.u64, shape=(px + 1) // 2)  # two pixels to an element
         self.accA = ti.ndarray(vec4, shape=both)
         self.accA.fill(ti.Vector([0.0, 0.0, 0.0, 1.0]))  # the empty layer (see composite.splat_tiles)
         self.accB = ti.ndarray(vec4, shape=both if alpha else 1)
@@ -113,3 +114,17 @@ def packed_view(image: np.ndarray, W: int, H: int, name: str = "out") -> np.ndar
     if not image.flags.c_contiguous:
         raise ValueError(f"{name}: need a C-contiguous array (np.empty((H, W, 4), np.uint8))")
     return image.view(np.uint32).reshape(H * W)
+
+
+_NO_WIDE = np.zeros(1, np.uint64)
+
+
+def wide_view(image: np.ndarray):
+    """The flat u64 view of a packed image (two pixels an element) and whether the kernels may
+    use it: its width even (a tile row starts on an element), its memory 8-byte aligned (a
+    caller's array may be a view at any offset) and the machine little-endian (an element's low
+    half is its first pixel); else a 1-element stand-in and 0."""
+    H, W = image.shape[:2]
+    if W % 2 == 0 and image.ctypes.data % 8 == 0 and sys.byteorder == "little":
+        return image.reshape(H * W * 4).view(np.uint64), 1
+    return _NO_WIDE, 0
