@@ -70,30 +70,42 @@ def _term(g: ti.template(), X: ti.template(), e):
     return val, G, ok
 
 
+@ti.func
+def element_force(g: ti.template(), X: ti.template(), V: ti.template(), e):
+    """fe[e, s] = −∂ψ/∂x_s (+ damping) of element e (its k slots; no other element writes them)."""
+    dt = g.dtype
+    val, G, ok = _term(g, X, e)
+    F = ti.Matrix.zero(dt, 3, 4)
+    if ti.static(g.kind == "elastic"):
+        F = -G
+        if ti.static(g.eta > 0):
+            nd = g.nodes[e]
+            fa, fb, fc, fd = terms.tet_viscous(dt, V[nd[0]], V[nd[1]], V[nd[2]], V[nd[3]], g.B[e],
+                                               g.rest[e], g.mat[2])
+            F += ti.Matrix.cols([fa, fb, fc, fd])
+    elif ok:
+        F = -g.k[e] * val * G  # ψ = ½ k C²: −∇ψ = −k C ∇C
+    for s in ti.static(range(g.arity)):
+        g.fe[e * g.arity + s] = ti.Vector([F[0, s], F[1, s], F[2, s]])
+
+
+@ti.func
+def node_force(g: ti.template(), w: ti.template(), A: ti.template(), j, i):
+    """A[j, i] += w_i Σ node i's slots, in their fixed (increasing) order."""
+    f = ti.Vector.zero(g.dtype, 3)
+    for q in range(g.slot_offset[i], g.slot_offset[i + 1]):
+        f += g.fe[g.slot[q]]
+    A[j, i] = A[j, i] + w[i] * f
+
+
 @ti.kernel
 def _forces(g: ti.template(), X: ti.template(), V: ti.template(), w: ti.template(), A: ti.template(),
             j: ti.i32):
-    """fe[e, s] = −∂ψ/∂x_s (+ damping) per element, then A[j, i] += w_i Σ its slots in order."""
-    dt = g.dtype
+    """fe per element, then A[j, i] += w_i Σ its slots in order."""
     for e in range(g.count):
-        val, G, ok = _term(g, X, e)
-        F = ti.Matrix.zero(dt, 3, 4)
-        if ti.static(g.kind == "elastic"):
-            F = -G
-            if ti.static(g.eta > 0):
-                nd = g.nodes[e]
-                fa, fb, fc, fd = terms.tet_viscous(dt, V[nd[0]], V[nd[1]], V[nd[2]], V[nd[3]], g.B[e],
-                                                   g.rest[e], g.mat[2])
-                F += ti.Matrix.cols([fa, fb, fc, fd])
-        elif ok:
-            F = -g.k[e] * val * G  # ψ = ½ k C²: −∇ψ = −k C ∇C
-        for s in ti.static(range(g.arity)):
-            g.fe[e * g.arity + s] = ti.Vector([F[0, s], F[1, s], F[2, s]])
+        element_force(g, X, V, e)
     for i in range(g.n_nodes):
-        f = ti.Vector.zero(dt, 3)
-        for q in range(g.slot_offset[i], g.slot_offset[i + 1]):
-            f += g.fe[g.slot[q]]
-        A[j, i] = A[j, i] + w[i] * f
+        node_force(g, w, A, j, i)
 
 
 @ti.kernel
@@ -168,6 +180,15 @@ def _project_one(g: ti.template(), X: ti.template(), w: ti.template(), hh, q):
         g.mult[e] += dlam
         for s in ti.static(range(g.arity)):
             X[nd[s]] += w[nd[s]] * dlam * ti.Vector([G[0, s], G[1, s], G[2, s]])
+
+
+@ti.func
+def sweep_serial(g: ti.template(), X: ti.template(), w: ti.template(), hh):
+    """Every colour in order on the calling thread (from inside a serial loop): no two elements
+    of a colour share a node, so this is the per-colour sweep's result (as the springs'
+    ``sweep_serial``)."""
+    for q in range(g.count):
+        _project_one(g, X, w, hh, q)
 
 
 @ti.kernel

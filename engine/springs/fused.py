@@ -19,18 +19,23 @@ atomics: the result is the same for any thread count. The per-substep times (α 
 t_end) are computed on the host in f64 exactly as the stepped path does and passed as one small
 ndarray (no field write, no extra launch). (Against a moving collider the two paths agree to
 rounding, not bit for bit: the same arithmetic compiled into two kernels contracts differently;
-hair's strands parted by 7e-8 m after 37 frames. Each path alone is deterministic, and which one
+hair's strands parted by 7e-8 m after 37 frames. So do energy terms' forces and projections, and
+an explicit method's located impacts on a sphere: in f64 ~1e-12 m at first, which a chaotic
+drape, such as a cloth sliding off a ball, grows to ~1e-4 m in 20 frames. Each path alone is deterministic, and which one
 runs depends on the scene, never on the thread count.)
 
 Used only when nothing needs the host between substeps (:meth:`SpringSystem._fusable`): CPU
 backend, fixed steps, no stretch limits, colliders that do not turn (moving ones are placed from a
 table of their poses over the substeps, computed on the host as it would place them), no rigid
-bodies' shapes, no energy terms, the springs
+bodies' shapes, energy terms of the built-in kinds only (engine.forces.elements: their XPBD sweep
+or their forces run serially here too; a user energy's autodiff kernels do not), the springs
 accumulated by gather, and at most :data:`MAX_NODES` nodes (beyond that two threads per phase beat
 one; the GPU keeps the launch-by-launch path, whose colour loops are parallel).
 """
 import taichi as ti
 
+from ..forces.elements import element_force, node_force
+from ..forces.elements import sweep_serial as sweep_elements
 from ..ode.staged import kick_drift_node, rk_stage_node
 from ..xpbd.constraints import sweep_serial
 from ..xpbd.solver import predict_node
@@ -44,6 +49,17 @@ from .forces import gather_node
 MAX_NODES = 4096
 
 
+@ti.func
+def add_elements(elements: ti.template(), X: ti.template(), V: ti.template(), w: ti.template(),
+                 A: ti.template(), j):
+    """A[j] += each energy term's w_i f_i, term by term (``ElementGroup.add_forces``, serial)."""
+    for gi in ti.static(range(len(elements))):
+        for e in range(elements[gi].count):
+            element_force(elements[gi], X, V, e)
+        for i in range(elements[gi].n_nodes):
+            node_force(elements[gi], w, A, j, i)
+
+
 @ti.kernel
 def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(), contacts: ti.template(),
               x0: ti.template(), v0: ti.template(), bad_t: ti.template(), log: ti.template(),
@@ -51,7 +67,7 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
               n_moves: ti.i32, poses: ti.types.ndarray(), n_shapes: ti.i32, xpbd: ti.template(),
               x_prev: ti.template(), lam: ti.template(), iterations: ti.i32, segments: ti.template(),
               A: ti.template(), rows: ti.template(), b: ti.template(), vs: ti.template(), yx: ti.template(),
-              yv: ti.template()) -> ti.f64:
+              yv: ti.template(), elements: ti.template()) -> ti.f64:
     """``moves``: (≥ n_moves, 4) f64 rows (node, x, y, z): pin targets set since the last step
     (a pin path's per-frame move), written here instead of one field write per component.
     ``poses``: (k, ≥ n_shapes, 6) rows (position, velocity) of the moving colliders' first
@@ -62,7 +78,9 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
     frame's first substep (pinned nodes' pin_start = where they are, as ``begin_frame``).
     ``xpbd``: an XPBD step (``x_prev``, ``lam``, ``iterations``); else a Runge–Kutta tableau's
     ``rows`` and ``b`` when ``rows`` is not empty (stage buffers ``vs``, ``yx``, ``yv``), or the
-    splitting scheme's ``segments`` ((slot, kick, drifts)), as FieldStepper, over its accelerations ``A``."""
+    splitting scheme's ``segments`` ((slot, kick, drifts)), as FieldStepper, over its accelerations ``A``.
+    ``elements``: the body's energy terms (a tuple of :class:`~engine.forces.elements.ElementGroup`),
+    in the launched path's order: XPBD groups after the springs, forces after the springs' gather."""
     X, V, w = ti.static(state.node_pos, state.node_vel, model.node_inv_mass)
     n = ti.static(model.node_count)
     g = ti.cast(fields.gravity[None], model.dtype)  # fields: engine.forces.fields.PointForces
@@ -86,18 +104,25 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
                 predict_node(X, V, w, x_prev, hh, fields, g, i)
             for s in range(model.spring_count):
                 lam[s] = 0
+            for gi in ti.static(range(len(elements))):
+                for e in range(elements[gi].count):
+                    elements[gi].mult[e] = 0
             for _ in range(iterations):
                 sweep_serial(model, X, x_prev, w, lam, hh)
+                for gi in ti.static(range(len(elements))):
+                    sweep_elements(elements[gi], X, w, hh)
             for i in range(n):
                 V[i] = (X[i] - x_prev[i]) / hh
         elif ti.static(len(rows)):  # explicit RK: stage j from the stages before it (FieldStepper.step)
             for i in range(n):
                 A[0, i] = gather_node(model, fields, g, X, V, i)
+            add_elements(elements, X, V, w, A, 0)
             for j in ti.static(range(1, len(rows))):
                 for i in range(n):
                     rk_stage_node(X, V, A, vs, yx, yv, i, hh, rows[j], False)
                 for i in range(n):
                     A[j, i] = gather_node(model, fields, g, yx, yv, i)
+                add_elements(elements, yx, yv, w, A, j)
             for i in range(n):
                 rk_stage_node(X, V, A, vs, yx, yv, i, hh, b, True)
         else:
@@ -105,6 +130,7 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
                 slot, kick, drifts = ti.static(segments[seg][0], segments[seg][1], segments[seg][2])
                 for i in range(n):
                     A[slot, i] = gather_node(model, fields, g, X, V, i)
+                add_elements(elements, X, V, w, A, slot)
                 for i in range(n):
                     kick_drift_node(X, V, A, i, hh, slot, kick, drifts)
         if ti.static(contacts.on):

@@ -21,6 +21,7 @@ import taichi as ti
 
 from ..contacts import ContactBuffer
 from ..control import ColliderInput, Control
+from ..forces.elements import ElementGroup
 from ..forces.fields import PointForces
 from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
@@ -161,8 +162,6 @@ class SpringSystem:
         self.bounds = self._bounds()
 
     def _group(self, spec: dict):
-        from ..forces.elements import ElementGroup
-
         return ElementGroup(positions=self.top.positions, dtype=self.dtype, **spec)
 
     def _bounds(self) -> dict:
@@ -247,9 +246,11 @@ class SpringSystem:
     def _fusable(self) -> bool:
         """Whether a frame's substeps run in one launch (engine.springs.fused): nothing needs the
         host between them and the network is small enough for one CPU thread."""
-        if (self.adaptive or self._limits is not None or self.elements or self._self is not None
-                or not self.model.spring_count):  # (self-collision runs between steps, on the host's call)
+        if (self.adaptive or self._limits is not None or self._self is not None
+                or not (self.model.spring_count or self.elements)):  # (self-collision runs between steps, on the host's call)
             return False
+        if not all(isinstance(g, ElementGroup) for g in self.elements):
+            return False  # a user energy's autodiff kernels run launch by launch
         if self.model.node_count > fused.MAX_NODES or _arch_in_use() != "cpu":
             return False
         if self._contacts.on and self.control.colliders_move and (
@@ -270,9 +271,9 @@ class SpringSystem:
             x0, v0 = self._x0, self._v0
         st = self.stepper
         if self.integrator == "xpbd":
-            spr = st.groups[0] if st.groups else None
-            lam = spr.lam if spr is not None else st.x_prev
-            its = st.iterations if spr is not None else 0
+            spr = [g for g in st.groups if isinstance(g, SpringConstraints)]  # (absent without springs)
+            lam = spr[0].lam if spr else st.x_prev
+            its = st.iterations if st.groups else 0
             args = (True, st.x_prev, lam, its, (), st.x_prev, (), (), st.x_prev, st.x_prev, st.x_prev)
         elif hasattr(st, "_segments"):
             segs = tuple((slot, kick, tuple(drifts)) for slot, kick, drifts in st._segments)
@@ -287,7 +288,7 @@ class SpringSystem:
                 n_shapes = self.colliders.count
         self._bad_seen = fused.run_steps(self.model, self.state, self.fields, self._contacts, x0, v0,
                                          self._bad, self.contact_log, times, h, int(j == 0), self._move_rows(),
-                                         len(self._moves), poses, n_shapes, *args)
+                                         len(self._moves), poses, n_shapes, *args, tuple(self.elements))
         self._moves = {}
         return n - j
 
