@@ -65,7 +65,7 @@ def _crossings(t, x):
     return t[i] - x[i] * (t[i + 1] - t[i]) / (x[i + 1] - x[i])
 
 
-@pytest.mark.parametrize("integrator", ["symplectic_euler", "rk4"])
+@pytest.mark.parametrize("integrator", ["symplectic_euler", pytest.param("rk4", marks=pytest.mark.slow)])
 def test_harmonic_well_oscillates_with_its_period_and_bounded_energy(integrator):
     """Released at rest 0.5 m from the centre of ½k|x − c|²: 5 periods of 2π/√k = 1 s."""
     s = scene(integrator=integrator)
@@ -121,7 +121,7 @@ def test_autodiff_gradient_equals_the_closed_forms():
     assert e["crater"] == pytest.approx(-3.0 * math.exp(-(d @ d) / 0.98), rel=1e-6)
 
 
-@pytest.mark.parametrize("adaptive", [False, True])
+@pytest.mark.parametrize("adaptive", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_terrain_potential_is_gravity_on_its_emitters_only(adaptive):
     """U = g·y with gravity 0: y = y₀ − g t²/2 (Verlet is exact for a constant force; step
     doubling with RK4 too); the particles of the emitter it does not name stay at rest."""

@@ -224,7 +224,8 @@ def _levels(s):
     return set(np.unique(info[info[:, 0] != 0, 2]).tolist())
 
 
-@pytest.mark.parametrize("schedule, size, level", [("tiles", 0.6, 1), ("pixels", 0.6, 1), ("tiles", 2.0, 2),
+@pytest.mark.parametrize("schedule, size, level", [("tiles", 0.6, 1), pytest.param("pixels", 0.6, 1, marks=pytest.mark.slow),
+                                                   pytest.param("tiles", 2.0, 2, marks=pytest.mark.slow),
                                                    ("pixels", 2.0, 2)])
 def test_once_every_particle_is_gone_the_frame_is_the_background_again(schedule, size, level):
     """A frame with nothing to draw skips the splat only once no reduced or coarse tile is left

@@ -94,7 +94,7 @@ def test_single_spring_period():
     assert period == pytest.approx(2 * np.pi / np.sqrt(k / m), rel=0.01)
 
 
-@pytest.mark.parametrize("integrator", ["symplectic_euler", "rk4"])
+@pytest.mark.parametrize("integrator", ["symplectic_euler", pytest.param("rk4", marks=pytest.mark.slow)])
 def test_momentum_conserved_in_free_network(integrator):
     top = jelly(3, 3, 3, ks=80.0, kd=0.2, mass=0.05)
     rng = np.random.default_rng(7)
