@@ -31,6 +31,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..launch import fast
 from .splat import add_sprite, capsule_point, disc_weight, record_box
 from .sprites import TILE
 from .upsample import ND_I1, ND_V4, co_mix, co_quad, lo_edge, lo_near, lo_rows, lo_sample, tile_is_edge
@@ -490,6 +491,8 @@ def _build(uses_add: bool, uses_alpha: bool):
                     hi = ti.cast(finish(bgc[2 * i + 1], EMPTY_LAYER, EMPTY_LAYER, exposure, mode), ti.u64)
                 bg_packed[i] = lo | (hi << 32)
 
-    return dict(splat_tiles=splat_tiles, splat_pixels_co=splat_pixels_co, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
-                composite_tiles=composite_tiles, composite_pixels=composite_pixels,
-                pack_background=pack_background)
+    # (launched without Taichi's per-argument Python: engine.launch)
+    return {name: fast(k) for name, k in dict(
+        splat_tiles=splat_tiles, splat_pixels_co=splat_pixels_co, splat_pixels_lo=splat_pixels_lo, lo_rows=lo_rows,
+        composite_tiles=composite_tiles, composite_pixels=composite_pixels,
+        pack_background=pack_background).items()}

@@ -22,7 +22,10 @@ from collections import OrderedDict
 import numpy as np
 import taichi as ti
 
-from .background import build_background_kernel, copy_background, downsample_depth
+from ..launch import fast
+from .background import build_background_kernel
+from .background import copy_background as _copy_background
+from .background import downsample_depth as _downsample_depth
 from .binning import build_binning_kernels, chunks_for
 from .composite import build_composite_kernels
 from .resolution import CO_MIN_TEXELS, LO_MIN_TEXELS, particle_scale
@@ -87,6 +90,7 @@ class Renderer:
             self.capacity = state.capacity
         self.uses_alpha = uses_alpha
         self._k = build_composite_kernels(uses_add, uses_alpha)
+        self._copy_background, self._downsample_depth = fast(_copy_background), fast(_downsample_depth)
         self.mesh = None
         if bodies:
             from .mesh import MeshLayer
@@ -164,7 +168,7 @@ class Renderer:
         if rect is not None:
             self._background(t.bgc, t.depth, *cam, W, H, int(show), *rect)
             if t.mesh:
-                copy_background(t.fbg, t.fdep, t.bgc, t.depth, W, *rect)
+                self._copy_background(t.fbg, t.fdep, t.bgc, t.depth, W, *rect)
         if (exposure, mode) != t.packed_key:
             self._k["pack_background"](t.bgc, t.bg_packed, W, H, 0, 0, W, H, exposure, mode)
             t.packed_key = (exposure, mode)
@@ -180,9 +184,9 @@ class Renderer:
             for k, at, Wk, Hk in ((round(1 / t.scale), t.LO, t.Wl, t.Hl), (round(2 / t.scale), t.LC, t.Wc, t.Hc)):
                 if rect is not None:
                     lo = (rect[0] // k, rect[1] // k, min(Wk, -(-rect[2] // k)), min(Hk, -(-rect[3] // k)))
-                    downsample_depth(dep, W, H, at, Wk, k, *lo, t.dirty, prev, t.TX, 0)
+                    self._downsample_depth(dep, W, H, at, Wk, k, *lo, t.dirty, prev, t.TX, 0)
                 if self.mesh is not None:
-                    downsample_depth(dep, W, H, at, Wk, k, 0, 0, Wk, Hk, t.dirty, prev, t.TX, 1)
+                    self._downsample_depth(dep, W, H, at, Wk, k, 0, 0, Wk, Hk, t.dirty, prev, t.TX, 1)
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:
