@@ -9,8 +9,8 @@ arguments each, several times a frame: a 28-argument kernel cost ~300 µs a call
 :class:`FastKernel` calls the kernel the usual way once — which checks the arguments, compiles,
 and binds the compiled instance — and afterwards sets the arguments straight into a launch
 context by their annotated kind, then launches the same compiled code (same bytes). It only
-takes kernels whose arguments are all ndarrays and scalars (no ``ti.template()``: their key is
-the objects themselves; no vectors), and only on the CPU backend (a GPU's numpy arguments need
+takes kernels whose arguments are all ndarrays, scalars and float vectors (no ``ti.template()``:
+their key is the objects themselves), and only on the CPU backend (a GPU's numpy arguments need
 the copies the usual path makes). A numpy argument's dtype and rank are part of the binding: a
 call with different ones goes the usual way (which checks them) and binds again. The callers
 are the engine's own: each ndarray is one the renderer allocated with the annotated type.
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-_ND, _INT, _UINT, _FLOAT = range(4)
+_ND, _INT, _UINT, _FLOAT, _VEC = range(5)
 
 
 class FastKernel:
@@ -28,6 +28,7 @@ class FastKernel:
     def __init__(self, kernel):
         from taichi.lang.util import cook_dtype
         from taichi.types.utils import is_signed
+        from taichi.lang.matrix import VectorType
         from taichi.types import ndarray_type, primitive_types
 
         self.kernel = kernel
@@ -42,6 +43,8 @@ class FastKernel:
                 kinds.append(_INT if is_signed(cook_dtype(an)) else _UINT)
             elif id(an) in primitive_types.real_type_ids:
                 kinds.append(_FLOAT)
+            elif isinstance(an, VectorType) and an.dtype in primitive_types.real_types:
+                kinds.append((_VEC, an.n))  # a float vector: its n entries, as the usual path sets them
             else:
                 return  # a template, vector or struct argument: always the usual path
         ret = prim.return_type
@@ -83,8 +86,13 @@ class FastKernel:
                 ctx.set_arg_int((i,), int(v))
             elif kind == _UINT:
                 ctx.set_arg_uint((i,), int(v))
-            else:
+            elif kind == _FLOAT:
                 ctx.set_arg_float((i,), float(v))
+            else:
+                if len(v) != kind[1]:
+                    return self.kernel(*args)  # (the usual path refuses it)
+                for j in range(kind[1]):
+                    ctx.set_struct_arg_float((i, j), float(v[j]))
         prog.launch_kernel(b[3], ctx)
         if self._ret is None:
             return None

@@ -27,6 +27,12 @@ def _mix(a: ND_I, v: ND_V, out: ND_U, k: ti.i32, u: ti.u32, x: ti.f32) -> ti.f32
 
 
 @ti.kernel
+def _vec(out: ti.types.ndarray(dtype=ti.f32, ndim=1), o: ti.types.vector(3, ti.f32), s: ti.f32):
+    for i in range(3):
+        out[i] = o[i] * s
+
+
+@ti.kernel
 def _with_template(f: ti.template(), k: ti.i32):
     f[None] = k
 
@@ -45,6 +51,16 @@ def test_fast_calls_give_the_usual_calls_results():
         assert fk._bound is not None  # bound at the first call: the rest took the fast path
         assert np.array_equal(got, want) and r_got == r_want, (k, u, x)
     assert np.array_equal(got, np.arange(6) * 5 + 2**31 + 3 + np.floor(np.arange(0, 12, 2) * 0.25))
+
+
+def test_a_float_vector_argument_is_set_entry_by_entry():
+    fk = FastKernel(_vec)
+    for o, s in (((1.0, 2.0, 3.0), 2.0), ((-0.5, 4.0, 0.25), 3.0), (np.array([7.0, 8.0, 9.0]), 0.5)):
+        out = np.zeros(3, np.float32)
+        fk(out, o, s)
+        assert fk._bound is not None and np.array_equal(out, np.asarray(o, np.float32) * np.float32(s))
+    with pytest.raises(Exception):  # two entries for three: the usual path refuses it
+        fk(np.zeros(3, np.float32), (1.0, 2.0), 1.0)
 
 
 def test_an_argument_the_binding_does_not_cover_goes_the_usual_way():

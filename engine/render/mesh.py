@@ -20,6 +20,7 @@ background and depth stay as the background pass left them.
 import numpy as np
 import taichi as ti
 
+from ..launch import fast
 from .sprites import TILE
 
 vec3 = ti.types.vector(3, ti.f32)
@@ -75,7 +76,7 @@ class MeshLayer:
             self.adj_start.from_numpy(starts)
         if self.line_count:
             self.line_idx.from_numpy(self.lines)
-        self._frame = _build(self)
+        self._frame = fast(_build(self))  # (engine.launch)
 
     def update(self) -> None:
         """Copy the bodies' node positions in (``draw`` recomputes the vertex normals)."""

@@ -78,13 +78,14 @@ class Renderer:
             raise ValueError(f"schedule: unknown value {self.schedule!r}; allowed: {', '.join(SCHEDULES)}")
         self.chunks = chunks_for(self.cpu)
         self.has_particles = state is not None and len(emitter_configs) > 0
-        self._background = build_background_kernel(render_cfg, colliders)
+        # (each per-frame kernel launched without Taichi's per-argument Python: engine.launch)
+        self._background = fast(build_background_kernel(render_cfg, colliders))
         uses_add = uses_alpha = False
         if self.has_particles:
             self.look = Look(emitter_configs, rows)  # (rows: spare emitter rows, engine.api add_emitter)
             uses_add, uses_alpha = self.look.uses_additive, self.look.uses_alpha
             self.records = SpriteRecords(state.capacity)
-            self._sprites = build_sprite_kernel(state, self.look, self.records)
+            self._sprites = fast(build_sprite_kernel(state, self.look, self.records))
             self._tally, self._scatter = build_binning_kernels(
                 self.records, state.capacity, self.chunks)
             self.capacity = state.capacity
