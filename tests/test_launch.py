@@ -61,6 +61,9 @@ def test_a_float_vector_argument_is_set_entry_by_entry():
         assert fk._bound is not None and np.array_equal(out, np.asarray(o, np.float32) * np.float32(s))
     with pytest.raises(Exception):  # two entries for three: the usual path refuses it
         fk(np.zeros(3, np.float32), (1.0, 2.0), 1.0)
+    for short in ((np.zeros(3, np.float32), (1.0, 2.0, 3.0)), ()):  # refused as Taichi refuses it
+        with pytest.raises(Exception, match="missing"):
+            fk(*short)
 
 
 def test_an_argument_the_binding_does_not_cover_goes_the_usual_way():
