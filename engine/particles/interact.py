@@ -125,8 +125,11 @@ class Interactions(FluidTerms):
             self.mesh = p.method == "mesh" or (p.method == "auto" and slots > AUTO_DIRECT)
             if self.mesh:
                 self.g_acc = ti.Vector.field(3, ti.f32, shape=n)  # the mesh's accelerations, m/s²
-            else:  # the pair sum reads the gravity slots' positions packed in slot order
-                self.g_pos = ti.Vector.field(3, ti.f32, shape=n)
+            else:  # the pair sum reads the gravity slots' positions packed in slot order, one
+                # array per axis (SoA): the inner loop then vectorizes on plain 8-wide loads
+                # instead of de-interleaving x, y, z (same sums, same bytes; galaxy's 9 M pairs a
+                # step 11-13 -> 6.4-7.4 ms in a micro-benchmark)
+                self.g_pos = ti.Vector.field(3, ti.f32, shape=n, layout=ti.Layout.SOA)
                 self.g_count = ti.field(ti.i32, shape=())
         self.grid = HashGrid(n, cell, self.lo, self.hi) if cell > 0 else None
         # each member's neighbours listed once a step and reused by every gather while they hold
