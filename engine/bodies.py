@@ -161,8 +161,7 @@ class SoftBody(SystemBase):
         if c.pin_path and not self.released and len(self.pinned):
             offset = sample_path(self._pin_path, t0 + dt, (0, 0, 0)) \
                 - np.asarray(c.pin_path[0].position, np.float64)
-            for node, home in zip(self.pinned, self.pin_home):
-                self.system.set_pin_target(int(node), home + offset)
+            self.system.set_pin_targets(self.pinned, self.pin_home + offset)
         self.system.apply(self.control.take_pins(self.index))
         self.system.step(dt)
 
