@@ -10,7 +10,8 @@ tested against the background and hiding the particles behind them. Parallel and
   interpolated perspective-correctly through 1/z, one directional light, two-sided.
 * **Lines** (1 px, bilinear coverage a per sample) add their optical depth −log(1 − a) and their
   colour weighted by it into fixed-point integers: integer sums are exact in any order, and
-  T = exp(−Σ) is what drawing them one over another gives for lines of one colour.
+  T = exp(−Σ) is what drawing them one over another gives for lines of one colour. The four i32
+  sums of a pixel travel as two i64 (``pack2``), so a sample makes two atomic adds, not four.
 
 Only tiles a body touches (this frame or the last) are rewritten: the rest of the frame's
 background and depth stay as the background pass left them.
@@ -27,7 +28,7 @@ vec3 = ti.types.vector(3, ti.f32)
 ND_V4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.f32), ndim=1)  # pixel arrays: flat, y·W + x
 ND_F = ti.types.ndarray(dtype=ti.f32, ndim=1)
 ND_I64 = ti.types.ndarray(dtype=ti.i64, ndim=1)
-ND_I4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.i32), ndim=1)
+ND_L2 = ti.types.ndarray(dtype=ti.types.vector(2, ti.i64), ndim=1)
 ND_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
 NEAR = 0.05
 DEPTH_BIAS = 0.01  # m: cloth resting on the ground would z-fight it
@@ -138,7 +139,7 @@ def _build(m: MeshLayer):
                         if ti.static(tri_count > 0):
                             vis[k] = ti.i64(EMPTY)
                         if ti.static(line_count > 0):
-                            lines[k] = ti.Vector([0, 0, 0, 0])
+                            lines[k] = ti.Vector([0, 0], dt=ti.i64)
             dirty_prev[t] = dirty[t]
             dirty[t] = 0
 
@@ -165,6 +166,22 @@ def _build(m: MeshLayer):
                             ti.atomic_min(vis[py * W + px], key)
                             dirty[(py // TILE) * TX + px // TILE] = 1  # same value from any thread
         # (positive floats order like their bit patterns, so the integer minimum is the nearest)
+
+    @ti.func
+    def pack2(lo, hi):
+        """Two i32 sums as one i64, hi·2³² + lo: sums of such values are the two sums packed
+        the same way (mod 2⁶⁴), so one 64-bit atomic add does the work of two 32-bit ones; each
+        half unpacks exactly while its sum fits an i32, as the four i32 sums needed already."""
+        return (ti.cast(hi, ti.i64) << 32) + ti.cast(lo, ti.i64)
+
+    @ti.func
+    def unpack4(p):
+        """The four i32 sums of a pixel's two packed i64 (``pack2``)."""
+        a = ti.cast(p[0], ti.i32)  # (truncation: the low half, as a signed i32)
+        c = ti.cast(p[1], ti.i32)
+        b = ti.cast((p[0] - ti.cast(a, ti.i64)) >> 32, ti.i32)
+        d = ti.cast((p[1] - ti.cast(c, ti.i64)) >> 32, ti.i32)
+        return ti.Vector([a, b, c, d])
 
     @ti.func
     def tri_depth(vis: ti.template(), i):
@@ -202,7 +219,9 @@ def _build(m: MeshLayer):
                                     tau = -ti.log(1.0 - ti.min(0.999, 1.6 * w))
                                     v = ti.cast(ti.Vector([tau, tau * col[0], tau * col[1],
                                                            tau * col[2]]) * FIXED, ti.i32)
-                                    ti.atomic_add(acc[Y * W + X], v)  # integers: exact in any order
+                                    # integers: exact in any order
+                                    ti.atomic_add(acc[Y * W + X], ti.Vector([pack2(v[0], v[1]),
+                                                                             pack2(v[2], v[3])]))
                                     dirty[(Y // TILE) * TX + X // TILE] = 1
 
     @ti.func
@@ -240,7 +259,7 @@ def _build(m: MeshLayer):
                                 c4 = ti.Vector([sc[0], sc[1], sc[2], 1.0])
                                 z = zt
                         if ti.static(line_count > 0):
-                            s = acc[k]
+                            s = unpack4(acc[k])
                             if s[0] > 0:
                                 T = ti.exp(-s[0] / FIXED)
                                 lc = ti.Vector([s[1], s[2], s[3]]) / ti.cast(s[0], ti.f32)
@@ -250,7 +269,7 @@ def _build(m: MeshLayer):
                         fdep[k] = z
 
     @ti.kernel
-    def frame(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, vis: ND_I64, acc: ND_I4, dirty: ND_I1,
+    def frame(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, vis: ND_I64, acc: ND_L2, dirty: ND_I1,
               dirty_prev: ND_I1, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32, W: ti.i32, H: ti.i32,
               TX: ti.i32, TY: ti.i32, whole: ti.i32):
         """A frame's meshes in one launch: vertex normals, then the buffers cleared, the

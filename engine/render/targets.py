@@ -13,7 +13,7 @@ that hold sprites (the reduced part ends as the layer (RGB, T), the coarse one k
 ``touched_co`` (T2,) coarse tiles holding sprites. Tiles (full, reduced, coarse: T0 + T1 + T2 =
 T in one index space): ``hist``
 (chunks, T) i32, ``tile_count``/``tile_start`` (T,), ``block_sum``, ``pairs`` (grows). Soft bodies:
-``vis`` i64 visibility buffer, ``lines`` ivec4 line sums, ``fbg``/``fdep`` the frame's background
+``vis`` i64 visibility buffer, ``lines`` line sums (two packed i64 a pixel: engine.render.mesh), ``fbg``/``fdep`` the frame's background
 with the bodies drawn in, ``dirty``/``dirty_prev`` (T0,) tiles the bodies touch. ``edges`` (T0,) the composite's cache of
 which tiles' upsample is bilateral somewhere (engine.render.composite).
 """
@@ -29,8 +29,6 @@ from .binning import SCAN_BLOCK, vec16
 from .sprites import TILE
 
 vec4 = ti.types.vector(4, ti.f32)
-ivec4 = ti.types.vector(4, ti.i32)
-
 
 
 def tiles_for(W: int, H: int):
@@ -88,7 +86,7 @@ class FrameTargets:
         self.mesh = mesh
         if mesh:
             self.vis = ti.ndarray(ti.i64, shape=px)
-            self.lines = ti.ndarray(ivec4, shape=px)
+            self.lines = ti.ndarray(ti.types.vector(2, ti.i64), shape=px)
             self.fbg = ti.ndarray(vec4, shape=px)
             self.fdep = ti.ndarray(ti.f32, shape=both)
             self.dirty_prev = ti.ndarray(ti.i32, shape=self.T0)
