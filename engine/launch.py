@@ -8,18 +8,57 @@ arguments each, several times a frame: a 28-argument kernel cost ~300 µs a call
 
 :class:`FastKernel` calls the kernel the usual way once — which checks the arguments, compiles,
 and binds the compiled instance — and afterwards sets the arguments straight into a launch
-context by their annotated kind, then launches the same compiled code (same bytes). It only
-takes kernels whose arguments are all ndarrays, scalars and float vectors (no ``ti.template()``:
-their key is the objects themselves), and only on the CPU backend (a GPU's numpy arguments need
-the copies the usual path makes). A numpy argument's dtype and rank are part of the binding: a
-call with different ones goes the usual way (which checks them) and binds again. The callers
-are the engine's own: each ndarray is one the renderer allocated with the annotated type.
+context by their annotated kind, then launches the same compiled code (same bytes). It takes
+kernels whose arguments are ndarrays, scalars, float vectors and ``ti.template()`` objects, and
+only on the CPU backend (a GPU's numpy arguments need the copies the usual path makes). A
+numpy argument's dtype and rank are part of the binding: a call with different ones goes the
+usual way (which checks them) and binds again.
+
+Template arguments are compiled in, not passed: a binding holds for the very objects it was made
+with. It keeps each as a weak reference, as Taichi's own template key does (a strong one would
+keep a dropped scene's fields alive, which engine.reuse hands to the next scene), or, for a
+number, a bool or a string, its type and value; a tuple item by item. A call whose template
+arguments are not a binding's (another object, or one that died and whose id came back) goes the
+usual way and binds them; anything else (a list, an object without weak references) always goes
+the usual way. At most ``MAX_BINDINGS`` bindings a kernel (then they start over): a kernel
+called for several systems keeps one each. The callers are the engine's own: each ndarray is
+one the engine allocated with the annotated type.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
-_ND, _INT, _UINT, _FLOAT, _VEC = range(5)
+_ND, _INT, _UINT, _FLOAT, _VEC, _TPL = range(6)
+MAX_BINDINGS = 16
+_PLAIN = (int, float, bool, str)
+
+
+def _pin(v):
+    """(key, check) of a template argument: the key hashes it (by identity for an object), the
+    check tells whether a later argument is the same one (a weak reference for an object); None
+    when it cannot be pinned (then the kernel takes the usual path for it)."""
+    if type(v) in _PLAIN:
+        return (type(v), v), ("v", type(v), v)
+    if type(v) is tuple:
+        items = [_pin(x) for x in v]
+        if any(it is None for it in items):
+            return None
+        return tuple(k for k, _ in items), ("t", tuple(c for _, c in items))
+    try:
+        return id(v), ("w", weakref.ref(v))
+    except TypeError:
+        return None
+
+
+def _same(check, v) -> bool:
+    """Whether ``v`` is the template argument ``check`` (from :func:`_pin`) was made for."""
+    if check[0] == "w":
+        return check[1]() is v
+    if check[0] == "v":
+        return type(v) is check[1] and v == check[2]
+    return type(v) is tuple and len(v) == len(check[1]) and all(_same(c, x) for c, x in zip(check[1], v))
 
 
 class FastKernel:
@@ -33,11 +72,15 @@ class FastKernel:
 
         self.kernel = kernel
         self._kinds = None
+        from taichi.types import template
+
         prim = getattr(kernel, "_primal", None)
         kinds = []
         for arg in getattr(prim, "arguments", None) or ():
             an = arg.annotation
-            if isinstance(an, ndarray_type.NdarrayType):
+            if isinstance(an, template) or an is template:
+                kinds.append(_TPL)
+            elif isinstance(an, ndarray_type.NdarrayType):
                 kinds.append(_ND)
             elif id(an) in primitive_types.integer_type_ids:
                 kinds.append(_INT if is_signed(cook_dtype(an)) else _UINT)
@@ -46,14 +89,19 @@ class FastKernel:
             elif isinstance(an, VectorType) and an.dtype in primitive_types.real_types:
                 kinds.append((_VEC, an.n))  # a float vector: its n entries, as the usual path sets them
             else:
-                return  # a template, vector or struct argument: always the usual path
+                return  # an int vector, matrix or struct argument: always the usual path
         ret = prim.return_type
         if ret is not None and len(ret) != 1:
             return
         self._prim, self._ret = prim, (ret[0] if ret else None)
         self._kinds = tuple(kinds)
         self._nd = tuple(i for i, k in enumerate(kinds) if k == _ND)
-        self._bound = None  # (program, numpy signature, compiled kernel, compiled data)
+        self._tpl = tuple(i for i, k in enumerate(kinds) if k == _TPL)
+        # the launch context's slot of each passed argument (templates take none), and its kind
+        self._slots = tuple((i, i - sum(1 for j in self._tpl if j < i), k) for i, k in enumerate(kinds)
+                            if k != _TPL)
+        # template key -> (program, numpy signature, template checks, compiled kernel, compiled data)
+        self._bound = {}
 
     def __getattr__(self, name):  # the kernel's own attributes (``_primal``, …), for tests and tools
         if name == "kernel":
@@ -72,44 +120,58 @@ class FastKernel:
             return self.kernel(*args)  # (the usual path refuses it, naming the count)
         prog = impl.get_runtime().prog
         sig = self._signature(args)
-        b = self._bound
-        if b is None or b[0] is not prog or b[1] != sig:
-            return self._bind(prog, sig, args)
-        ctx = b[2].make_launch_context()
-        for i, (kind, v) in enumerate(zip(self._kinds, args)):
+        pins = None
+        if self._tpl:
+            pins = [_pin(args[i]) for i in self._tpl]
+            if any(p is None for p in pins):
+                return self.kernel(*args)  # (an argument it cannot pin: Taichi's own key decides)
+            key = tuple(k for k, _ in pins)
+        else:
+            key = ()
+        b = self._bound.get(key)
+        if (b is None or b[0] is not prog or b[1] != sig
+                or not all(_same(c, args[i]) for c, i in zip(b[2], self._tpl))):
+            return self._bind(prog, sig, args, key, pins)
+        ctx = b[3].make_launch_context()
+        for i, slot, kind in self._slots:
+            v = args[i]
             if kind == _ND:
                 if isinstance(v, np.ndarray):
                     if not v.flags.c_contiguous:
                         return self.kernel(*args)  # (the usual path copies it, or refuses it)
-                    ctx.set_arg_external_array_with_shape((i,), int(v.ctypes.data), v.nbytes, v.shape, 0)
+                    ctx.set_arg_external_array_with_shape((slot,), int(v.ctypes.data), v.nbytes, v.shape, 0)
                 else:
-                    ctx.set_arg_ndarray((i,), v.arr)
+                    ctx.set_arg_ndarray((slot,), v.arr)
             elif kind == _INT:
-                ctx.set_arg_int((i,), int(v))
+                ctx.set_arg_int((slot,), int(v))
             elif kind == _UINT:
-                ctx.set_arg_uint((i,), int(v))
+                ctx.set_arg_uint((slot,), int(v))
             elif kind == _FLOAT:
-                ctx.set_arg_float((i,), float(v))
+                ctx.set_arg_float((slot,), float(v))
             else:
                 if len(v) != kind[1]:
                     return self.kernel(*args)  # (the usual path refuses it)
                 for j in range(kind[1]):
-                    ctx.set_struct_arg_float((i, j), float(v[j]))
-        prog.launch_kernel(b[3], ctx)
+                    ctx.set_struct_arg_float((slot, j), float(v[j]))
+        prog.launch_kernel(b[4], ctx)
         if self._ret is None:
             return None
         prog.synchronize()
         return self._prim.construct_kernel_ret(ctx, self._ret, (0,))
 
-    def _bind(self, prog, sig, args):
-        """The usual call (checks, compiles), then the compiled instance kept for the next."""
+    def _bind(self, prog, sig, args, key, pins):
+        """The usual call (checks, compiles), then the compiled instance kept for the next call
+        with these template arguments."""
         from .runtime import _arch_in_use
 
         out = self.kernel(*args)
-        self._bound = None
+        self._bound.pop(key, None)
         if _arch_in_use() == "cpu" and not self._prim.has_print:  # (a print needs the usual sync)
+            if len(self._bound) >= MAX_BINDINGS:
+                self._bound.clear()
             cpp = self._prim.compiled_kernels[self._prim.ensure_compiled(*args)]
-            self._bound = (prog, sig, cpp, prog.compile_kernel(prog.config(), prog.get_device_caps(), cpp))
+            checks = tuple(c for _, c in pins) if pins else ()
+            self._bound[key] = (prog, sig, checks, cpp, prog.compile_kernel(prog.config(), prog.get_device_caps(), cpp))
         return out
 
 

@@ -85,10 +85,72 @@ def test_an_argument_the_binding_does_not_cover_goes_the_usual_way():
     assert not base.any()
 
 
-def test_a_kernel_with_template_arguments_always_takes_the_usual_path():
-    f = ti.field(ti.i32, ())
+@ti.kernel
+def _tuple_template(fs: ti.template(), k: ti.i32, x: ti.f32):
+    for i in ti.static(range(len(fs))):
+        fs[i][None] = k * (i + 1) + ti.cast(x, ti.i32)
+
+
+@ti.data_oriented
+class _Holder:
+    def __init__(self, n):
+        self.n = n
+        self.f = ti.field(ti.i32, ())
+
+
+@ti.kernel
+def _with_object(h: ti.template(), k: ti.i32):
+    h.f[None] = k * h.n
+
+
+def test_template_arguments_bind_to_the_objects_themselves():
+    """A binding holds for its template objects only: another object, a dead one's recycled id,
+    another plain value each bind anew, and every call writes where the usual call would."""
+    import gc
+
     fk = FastKernel(_with_template)
-    for k in (4, 5):
-        fk(f, k)
-        assert f[None] == k
-    assert fk._kinds is None and fk._primal is _with_template._primal
+    a, b = ti.field(ti.i32, ()), ti.field(ti.i32, ())
+    for k in (4, 5, 6):
+        fk(a, k)
+        fk(b, -k)
+        assert (a[None], b[None]) == (k, -k)
+    assert len(fk._bound) == 2  # one binding each, both kept
+    fo = FastKernel(_with_object)
+    ids = []
+    for n in range(1, 9):  # objects made and dropped: their ids come back, the binding must not
+        h = _Holder(n)
+        ids.append(id(h))
+        fo(h, 2)
+        assert h.f[None] == 2 * n, n  # (a stale binding writes the dead object's field)
+        del h
+        gc.collect()
+    assert len(set(ids)) < len(ids)  # (the case under test happened)
+    ft = FastKernel(_tuple_template)
+    fs = (ti.field(ti.i32, ()), ti.field(ti.i32, ()))
+    for k in (1, 2):
+        ft(fs, k, 0.5)
+        assert [f[None] for f in fs] == [k, 2 * k]
+    assert len(ft._bound) == 1
+    h1, h2 = _Holder(3), _Holder(5)
+    for k in (2, 3):
+        fo(h1, k)
+        fo(h2, k)
+        assert (h1.f[None], h2.f[None]) == (3 * k, 5 * k)
+    # a binding keeps no template object alive (a dropped scene's fields go back to engine.reuse)
+    import weakref
+
+    r = weakref.ref(h2)
+    del h2
+    gc.collect()
+    assert r() is None
+
+
+def test_a_kernel_with_an_argument_it_cannot_set_takes_the_usual_path():
+    @ti.kernel
+    def ivec(out: ti.types.ndarray(dtype=ti.i32, ndim=1), v: ti.types.vector(2, ti.i32)):
+        out[0] = v[0] + v[1]
+
+    out = np.zeros(1, np.int32)
+    fk = FastKernel(ivec)
+    fk(out, (2, 3))
+    assert fk._kinds is None and out[0] == 5

@@ -16,6 +16,7 @@ stepper, forces and colliders are compile-time parts of it), warp.sim style; the
 import taichi as ti
 
 from ..contacts import ContactBuffer
+from ..launch import fast
 from ..ode.events import doubling_error, fixed_error, located_step
 from ..ode.steppers import doubling_step, is_finite, make_step, scaled_error
 
@@ -264,3 +265,9 @@ def count_alive(alive: ti.template(), n: ti.i32) -> ti.i32:
     for i in range(n):
         c += alive[i]
     return c
+
+
+# launched without Taichi's per-call Python (engine.launch: the integrator is a template argument,
+# bound by a weak reference; several a frame in every particle scene)
+step_fixed, step_fixed_run, attempt, commit, count_alive = (
+    fast(k) for k in (step_fixed, step_fixed_run, attempt, commit, count_alive))

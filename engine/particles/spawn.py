@@ -10,6 +10,7 @@ import math
 
 import taichi as ti
 
+from ..launch import fast
 from .rng import rand01
 
 SHAPES = {"point": 0, "sphere": 1, "box": 2, "disc": 3, "cone": 4}
@@ -260,3 +261,8 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
             _child(E, S, parent[n], c, s0 + n, slots[n], bit)
     E.emitter_head[c] = (h0 + total * count) % c_size
     E.emitter_serial[c] = s0 + total * count
+
+
+# launched without Taichi's per-call Python (engine.launch; the emitters, state and link fields
+# are template arguments, bound by weak references)
+spawn, spawn_children = fast(spawn), fast(spawn_children)
