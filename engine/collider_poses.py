@@ -16,6 +16,7 @@ import numpy as np
 import taichi as ti
 
 from .geometry.shapes import BOX, CAPSULE, PLANE, SPHERE, quat_matrix_t, quat_normalize_t
+from .launch import fast
 
 IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
@@ -43,6 +44,9 @@ def _pose_fields(point: ti.template(), vel: ti.template(), normal: ti.template()
                     axis_z[k][c] = rows[k, o + 6 + c]
                 if ti.static(spins):
                     omega[k][c] = rows[k, o + 9 + c]
+
+
+_pose_fields = fast(_pose_fields)  # (engine.launch: without Taichi's per-call Python)
 
 
 class ShapePoses:

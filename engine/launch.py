@@ -64,13 +64,14 @@ def _same(check, v) -> bool:
 class FastKernel:
     """``FastKernel(kernel)(*args)``: the kernel's result, as ``kernel(*args)``."""
 
-    def __init__(self, kernel):
+    def __init__(self, kernel, usual=None):
         from taichi.lang.util import cook_dtype
         from taichi.types.utils import is_signed
         from taichi.lang.matrix import VectorType
         from taichi.types import ndarray_type, primitive_types
 
         self.kernel = kernel
+        self._usual = usual if usual is not None else kernel  # the usual call, Taichi's checks and all
         self._kinds = None
         from taichi.types import template
 
@@ -113,18 +114,18 @@ class FastKernel:
 
     def __call__(self, *args):
         if self._kinds is None:
-            return self.kernel(*args)
+            return self._usual(*args)
         from taichi.lang import impl
 
         if len(args) != len(self._kinds):
-            return self.kernel(*args)  # (the usual path refuses it, naming the count)
+            return self._usual(*args)  # (the usual path refuses it, naming the count)
         prog = impl.get_runtime().prog
         sig = self._signature(args)
         pins = None
         if self._tpl:
             pins = [_pin(args[i]) for i in self._tpl]
             if any(p is None for p in pins):
-                return self.kernel(*args)  # (an argument it cannot pin: Taichi's own key decides)
+                return self._usual(*args)  # (an argument it cannot pin: Taichi's own key decides)
             key = tuple(k for k, _ in pins)
         else:
             key = ()
@@ -138,7 +139,7 @@ class FastKernel:
             if kind == _ND:
                 if isinstance(v, np.ndarray):
                     if not v.flags.c_contiguous:
-                        return self.kernel(*args)  # (the usual path copies it, or refuses it)
+                        return self._usual(*args)  # (the usual path copies it, or refuses it)
                     ctx.set_arg_external_array_with_shape((slot,), int(v.ctypes.data), v.nbytes, v.shape, 0)
                 else:
                     ctx.set_arg_ndarray((slot,), v.arr)
@@ -150,7 +151,7 @@ class FastKernel:
                 ctx.set_arg_float((slot,), float(v))
             else:
                 if len(v) != kind[1]:
-                    return self.kernel(*args)  # (the usual path refuses it)
+                    return self._usual(*args)  # (the usual path refuses it)
                 for j in range(kind[1]):
                     ctx.set_struct_arg_float((slot, j), float(v[j]))
         prog.launch_kernel(b[4], ctx)
@@ -164,7 +165,7 @@ class FastKernel:
         with these template arguments."""
         from .runtime import _arch_in_use
 
-        out = self.kernel(*args)
+        out = self._usual(*args)
         self._bound.pop(key, None)
         if _arch_in_use() == "cpu" and not self._prim.has_print:  # (a print needs the usual sync)
             if len(self._bound) >= MAX_BINDINGS:
@@ -177,3 +178,10 @@ class FastKernel:
 
 def fast(kernel) -> FastKernel:
     return FastKernel(kernel)
+
+
+def fast_method(cls, name: str) -> FastKernel:
+    """A ``@ti.data_oriented`` class's kernel method as a FastKernel called with the owner first:
+    ``fast_method(C, "step")(obj, h)`` is ``obj.step(h)`` (the owner is the kernel's ``self``
+    template argument, bound by a weak reference)."""
+    return FastKernel(getattr(cls, name), usual=lambda owner, *args: getattr(owner, name)(*args))

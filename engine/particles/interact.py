@@ -37,6 +37,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry.grid import HashGrid, NeighbourLists
+from ..launch import fast_method
 from . import pm
 from .fluid import FLUID_EPS, S_CORR_DQ, S_CORR_K, FluidTerms, lattice_constants, poly6
 from .pm import AUTO_DIRECT
@@ -149,15 +150,16 @@ class Interactions(FluidTerms):
         # (a kernel a stage: the grid, the lists and the test for stale lists live in them, so a
         # step takes 2 + iterations launches and reads nothing back; it took 5 + 2·iterations,
         # one more a relisting, iterations + 1 of them reads of ``stale``)
+        # (each launched without Taichi's per-call Python: engine.launch; sand's 24 a frame)
         if self.grid is not None:
-            self.begin()
+            _FAST["begin"](self)
         else:
-            self.prepare()
+            _FAST["prepare"](self)
         if self.mesh:
             self._mesh_gravity()
         for _ in range(self.iterations if self.grid is not None else 0):
-            self.sweep(h)
-        self.finish(h)
+            _FAST["sweep"](self, h)
+        _FAST["finish"](self, h)
 
     def _mesh_gravity(self) -> None:
         """The gravity slots' accelerations by particle–mesh (engine.particles.pm), at the step's
@@ -376,3 +378,6 @@ class Interactions(FluidTerms):
                         S.particle_alive[i] = 0
                 S.particle_pos[i] = x
                 S.particle_vel[i] = v
+
+
+_FAST = {name: fast_method(Interactions, name) for name in ("begin", "prepare", "sweep", "finish")}

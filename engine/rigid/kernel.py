@@ -9,6 +9,7 @@ The arithmetic of one element (a contact, a joint) is in :mod:`.elements`."""
 
 import taichi as ti
 
+from ..launch import fast
 from .elements import (f64, vec3, qrot, qrot_inv, add_rot, rot_between, arm_a, arm_b, point_b,
                        rel_vel, iinv, gen_w, apply_pos, apply_vel, positional, joint_points,
                        solve_joint)
@@ -139,7 +140,8 @@ def _build_io(F):
         for k in range(lam.shape[0]):
             lam[k] = F.lam[k]
 
-    return load_bodies, load_contacts, store
+    # (launched without Taichi's per-call Python: engine.launch)
+    return fast(load_bodies), fast(load_contacts), fast(store)
 
 
 def _build(F):
@@ -432,6 +434,9 @@ def _build(F):
                 velocity(i, h)
             for k in range(nc):
                 velocity_pass(k, h, glen)
+
+    # (launched without Taichi's per-call Python: engine.launch)
+    begin, joints, finish, whole = fast(begin), fast(joints), fast(finish), fast(whole)
 
     def substeps(n, h, g, glen, nc, nj):
         """n substeps of h: in one launch (up to WHOLE_MAX_BODIES bodies), else a begin, then per

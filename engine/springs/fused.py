@@ -35,6 +35,7 @@ one; the GPU keeps the launch-by-launch path, whose colour loops are parallel).
 import taichi as ti
 
 from ..forces.elements import element_force, node_force
+from ..launch import fast
 from ..forces.elements import sweep_serial as sweep_elements
 from ..ode.staged import kick_drift_node, rk_stage_node
 from ..xpbd.constraints import sweep_serial
@@ -141,3 +142,6 @@ def run_steps(model: ti.template(), state: ti.template(), fields: ti.template(),
         for i in range(n):
             finalize_node(model, state, contacts, x0, v0, bad_t, alpha, t_end, h, log, i)
     return bad_t[None]
+
+
+run_steps = fast(run_steps)  # (engine.launch: without Taichi's per-call Python)
