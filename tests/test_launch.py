@@ -154,3 +154,30 @@ def test_a_kernel_with_an_argument_it_cannot_set_takes_the_usual_path():
     fk = FastKernel(ivec)
     fk(out, (2, 3))
     assert fk._kinds is None and out[0] == 5
+
+
+@ti.data_oriented
+class _Counter:
+    def __init__(self, n):
+        self.v = ti.field(ti.i32, n)
+
+    @ti.kernel
+    def add(self, k: ti.i32, out: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        for i in self.v:
+            self.v[i] += k * (i + 1)
+            out[i] = self.v[i]
+
+
+def test_a_data_oriented_method_launches_fast_with_its_owner_first():
+    from engine.launch import fast_method
+
+    fm = fast_method(_Counter, "add")
+    c1, c2 = _Counter(3), _Counter(4)
+    for k in (1, 2):
+        o1, o2 = np.zeros(3, np.int32), np.zeros(4, np.int32)
+        fm(c1, k, o1)
+        fm(c2, k, o2)
+    assert o1.tolist() == [3, 6, 9] and o2.tolist() == [3, 6, 9, 12] and len(fm._bound) == 2
+    with pytest.raises(Exception, match="missing"):  # refused as obj.add(1) is refused
+        fm(c1, 1)
+    assert c1.v.to_numpy().tolist() == [3, 6, 9]  # (a refused call changed nothing)
