@@ -103,6 +103,7 @@ class FastKernel:
                             if k != _TPL)
         # template key -> (program, numpy signature, template checks, compiled kernel, compiled data)
         self._bound = {}
+        _register(self)
 
     def __getattr__(self, name):  # the kernel's own attributes (``_primal``, …), for tests and tools
         if name == "kernel":
@@ -174,6 +175,25 @@ class FastKernel:
             checks = tuple(c for _, c in pins) if pins else ()
             self._bound[key] = (prog, sig, checks, cpp, prog.compile_kernel(prog.config(), prog.get_device_caps(), cpp))
         return out
+
+
+_ALL = weakref.WeakSet()  # every FastKernel with bindings to drop when the program is reset
+_HOOKED = []
+
+
+def _register(fk) -> None:
+    if not _HOOKED:
+        from .runtime import on_reset
+
+        on_reset(_forget_all)
+        _HOOKED.append(True)
+    _ALL.add(fk)
+
+
+def _forget_all() -> None:
+    """engine.runtime.reset: drop every binding (each holds the old program's compiled code)."""
+    for fk in list(_ALL):
+        fk._bound = {}
 
 
 def fast(kernel) -> FastKernel:
