@@ -105,8 +105,13 @@ class RigidSystem(SystemBase):
         if not self._meshes:
             return np.zeros((0, 3), np.float32)
         S = self.state
-        out = [S.x[i] + quat.rotate(np.broadcast_to(S.q[i], (len(v), 4)), v) for i, (v, _) in enumerate(self._meshes)]
-        return np.concatenate(out).astype(np.float32)
+        if getattr(self, "_mesh_rows", None) is None:  # every vertex's body and local position, once
+            self._mesh_rows = (np.concatenate([np.full(len(v), i) for i, (v, _) in enumerate(self._meshes)]),
+                               np.concatenate([np.asarray(v, np.float64) for v, _ in self._meshes]))
+        body, local = self._mesh_rows
+        # all bodies in one batch (the same arithmetic per vertex as a body at a time: crates' 25
+        # boxes were 13 rotate calls a frame, ~1 ms of Python under cProfile)
+        return (S.x[body] + quat.rotate(S.q[body], local)).astype(np.float32)
 
     def energy(self) -> dict:
         S, m = self.state, self.model
