@@ -68,13 +68,11 @@ class FastKernel:
         from taichi.lang.util import cook_dtype
         from taichi.types.utils import is_signed
         from taichi.lang.matrix import VectorType
-        from taichi.types import ndarray_type, primitive_types
+        from taichi.types import ndarray_type, primitive_types, template
 
         self.kernel = kernel
         self._usual = usual if usual is not None else kernel  # the usual call, Taichi's checks and all
         self._kinds = None
-        from taichi.types import template
-
         prim = getattr(kernel, "_primal", None)
         kinds = []
         for arg in getattr(prim, "arguments", None) or ():

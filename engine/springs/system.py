@@ -391,9 +391,7 @@ class SpringSystem:
     def set_pin_target(self, node: int, pos) -> None:
         """Where a pinned node should be at the end of the next ``step``: it moves there linearly
         over the frame, its velocity inferred. Pins the node if it was free."""
-        if not self.model.pinned_mask[node]:
-            self.pin(node)
-        self._moves[node] = [float(c) for c in pos]  # written at the next step (_flush_moves)
+        self.set_pin_targets([node], [pos])
 
     def set_pin_targets(self, nodes, positions) -> None:
         """:meth:`set_pin_target` for many nodes at once: ``nodes`` (k,) ints, ``positions``
@@ -403,7 +401,7 @@ class SpringSystem:
         pos = np.asarray(positions, np.float64).reshape(len(nodes), 3)
         for node in nodes[~self.model.pinned_mask[nodes]].tolist():
             self.pin(node)
-        self._moves.update(zip(nodes.tolist(), pos.tolist()))
+        self._moves.update(zip(nodes.tolist(), pos.tolist()))  # written at the next step (_flush_moves)
 
     def apply(self, requests) -> None:
         """Pin requests from the control (:class:`~engine.control.PinRequest`), in order."""
