@@ -8,7 +8,8 @@ two pixels to an element (what an untouched tile copies). The splat arrays hold 
 Wl·Hl texels (Hl, Wl = ceil(scale · (H, W))), then the coarse level's Wc·Hc texels (at half the
 reduced scale; engine.render.composite): ``depth`` (the reduced parts: the farthest depth under
 each texel), ``accA``/``accB`` vec4 splat accumulators (engine.render.splat), written only in tiles
-that hold sprites (the reduced part ends as the layer (RGB, T), the coarse one keeps its sums);
+that hold sprites (the full part tile by tile, each tile one contiguous run:
+``composite.tile_rows``; the reduced part ends as the layer (RGB, T), the coarse one keeps its sums);
 ``touched_lo`` (T1,) reduced tiles drawn (their own sprites or the coarse level's under them),
 ``touched_co`` (T2,) coarse tiles holding sprites. Tiles (full, reduced, coarse: T0 + T1 + T2 =
 T in one index space): ``hist``
