@@ -365,34 +365,15 @@ def _build(uses_add: bool, uses_alpha: bool):
             accA[k] = layer(A, B, shading)
 
     @ti.func
-    def row_terms(y, s, Hl, W):
-        """The vertical half of the bilinear upsample at pixel row y (``lo_sample``'s, hoisted
-        out of the row): the fraction fy and the two interpolated rows' starts in ``rows``."""
-        v = (y + 0.5) * s - 0.5
-        j0 = ti.cast(ti.floor(v), ti.i32)
-        return v - j0, ti.min(ti.max(j0, 0), Hl - 1) * W, ti.min(ti.max(j0 + 1, 0), Hl - 1) * W
-
-    @ti.func
-    def tile_row(own: ti.template(), accA: ti.template(), accB: ti.template(), rows: ti.template(),
-                 bgc: ti.template(), out: ti.template(), ra, rb, k0, ka0, px0, fy, near, exposure,
-                 shading):
-        """A whole tile row (TILE pixels from k0 = y·W + px0), opaque RGBA, unrolled with the mode
-        a constant: the tile's own layer (``own``: accumulators from ka0) over the reduced layer
-        (where ``near``; bilinear: the tile is not an edge) over the background. All loads and
-        table lookups first, then the stores (a store through an ndarray makes every later load
-        re-read its array's address: none come between them). The per-pixel loop branches on the
-        mode and the levels at each pixel: for the reduced layer alone the row cost ~1 ms a frame
-        more at 1280×720; for tiles with sprites (explosion.toml at 1280×720, 1,628 of them) the
-        composite took 14.5–14.8 ms against 12.4–12.9 unrolled, old and new in turn."""
+    def reduced_row(rows: ti.template(), bgc: ti.template(), out: ti.template(), ra, rb, k0, px0, fy,
+                    exposure, mode):
+        """A whole tile row (TILE pixels from k0 = y·W + px0) of the reduced layer alone over the
+        background: all loads and table lookups first, then the stores (a store through an
+        ndarray makes every later load re-read its array's address: none come between them)."""
         vals = ti.Vector([0] * TILE, dt=ti.u32)
         for dx in ti.static(range(TILE)):
-            full = EMPTY_LAYER
-            if ti.static(own):
-                full = acc_layer(accA, accB, ka0 + dx, shading)
-            low = EMPTY_LAYER
-            if near != 0:
-                low = (1.0 - fy) * rows[ra + px0 + dx] + fy * rows[rb + px0 + dx]
-            vals[dx] = finish(bgc[k0 + dx], low, full, exposure, 0)
+            low = (1.0 - fy) * rows[ra + px0 + dx] + fy * rows[rb + px0 + dx]
+            vals[dx] = finish(bgc[k0 + dx], low, EMPTY_LAYER, exposure, mode)
         for dx in ti.static(range(TILE)):
             out[k0 + dx] = vals[dx]
 
@@ -457,25 +438,22 @@ def _build(uses_add: bool, uses_alpha: bool):
                     # the common case under smoke: the reduced layer alone, bilinear; the row
                     # terms hoisted by hand (two loads and a lerp per pixel)
                     for y in range(py0, py1 + 1):
-                        fy, ra, rb = row_terms(y, s, Hl, W)
+                        v = (y + 0.5) * s - 0.5
+                        j0 = ti.cast(ti.floor(v), ti.i32)
+                        fy = v - j0
+                        ra = ti.min(ti.max(j0, 0), Hl - 1) * W
+                        rb = ti.min(ti.max(j0 + 1, 0), Hl - 1) * W
                         if px1 - px0 == TILE - 1 and mode == 0:
-                            # a whole row of the tile, opaque RGBA (the usual mode; a second
-                            # unrolled copy for the other modes, ~0.15 s of every start: they
-                            # take the loop)
-                            tile_row(False, accA, accB, rows, bgc, out, ra, rb, y * W + px0, 0, px0, fy, 1,
-                                     exposure, shading)
+                            # a whole row of the tile, opaque RGBA (the usual mode) with the mode a
+                            # constant: its tests and swaps folded away (a branch per pixel cost
+                            # the unrolled row ~1 ms a frame at 1280×720; a second unrolled copy
+                            # for the other modes, ~0.15 s of every start: they take the loop)
+                            reduced_row(rows, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, 0)
                         else:
                             for x in range(px0, px1 + 1):
                                 low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
                                 out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
                                                         mode)
-                elif n > 0 and edge == 0 and px1 - px0 == TILE - 1 and mode == 0:
-                    # the usual tile with sprites: whole rows, unrolled, the mode a constant
-                    ab, aw = tile_rows(px0, py0, px1, py1, W)
-                    for y in range(py0, py1 + 1):
-                        fy, ra, rb = row_terms(y, s, Hl, W)
-                        tile_row(True, accA, accB, rows, bgc, out, ra, rb, y * W + px0, ab + y * aw + px0,
-                                 px0, fy, near, exposure, shading)
                 else:
                     ab, aw = tile_rows(px0, py0, px1, py1, W)
                     for y in range(py0, py1 + 1):
