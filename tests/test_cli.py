@@ -53,6 +53,7 @@ def test_run_renders_non_blank_frames(tmp_path, config):
     assert "peak live particles" in r.stdout
 
 
+@pytest.mark.slow  # two whole CLI runs (~25 s): the default run stays under 5 minutes on 2 cores
 def test_same_config_and_seed_give_byte_identical_pngs(tmp_path):
     outs = []
     for k in range(2):
