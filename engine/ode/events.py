@@ -126,8 +126,13 @@ def clear_of(events, dtype):
         for k in ti.static(range(n_fn)):
             ga, _gda, _Na = events.contact(k, xa, va, span)
             gb, _gdb, _Nb = events.contact(k, xb, vb, 0.0)
-            if not (gb >= 0.0 and (ga <= band(xa) or reach2 <= (ga + gb) * (ga + gb))):
+            # nested tests, the reach first: a far point (most points, most steps) does not
+            # pay for the start's contact band
+            if not (gb >= 0.0):
                 ok = 0
+            elif not (reach2 <= (ga + gb) * (ga + gb)):
+                if not (ga <= band(xa)):
+                    ok = 0
         if ti.static(events.event_count < events.count):
             if ok != 0 and events.near_projected(xb) != 0:
                 ok = 0
