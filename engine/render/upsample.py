@@ -23,6 +23,7 @@ vec4 = ti.types.vector(4, ti.f32)
 # its strides at every access (measured 1.2–1.7× slower in these loops than a flat index)
 ND_V4 = ti.types.ndarray(dtype=vec4, ndim=1)
 ND_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+ND_F = ti.types.ndarray(dtype=ti.f32, ndim=1)
 
 
 @ti.func
