@@ -1,12 +1,12 @@
 """Pooled XPBD fields: the fields (and so the compiled step kernels) of a rigid system that is
-gone serve the next system of the same shape (:class:`~engine.rigid.kernel.Fields`; leased by
+gone serve the next system of the same shape (:class:`~engine.rigid.fields.Fields`; leased by
 :class:`~engine.rigid.xpbd.XPBDSolver`)."""
 import gc
 import weakref
 from collections import Counter
 
 from .. import reuse, runtime
-from .kernel import Fields
+from .fields import Fields
 
 
 def room(n: int) -> int:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import kernel, pool, quat
+from . import fields, pool, quat
 from .shapes import SPHERE
 
 
@@ -58,7 +58,7 @@ class ContactSet:
 
 class XPBDSolver:
     """Steps a :class:`~engine.rigid.model.RigidState` (NumPy, float64) by substeps on float64
-    fields (:class:`~engine.rigid.kernel.Fields`: copied in and out once per step).
+    fields (:class:`~engine.rigid.fields.Fields`: copied in and out once per step).
     ``joints``: a :class:`~engine.rigid.joints.Joints`. ``awake``: bodies asleep hold still like
     fixed ones (no integration, zero inverse mass)."""
 
@@ -101,7 +101,7 @@ class XPBDSolver:
         nb = F.nb
         mov = m.dynamic & self.awake
         n = m.count
-        rows = np.zeros((nb, kernel.BODY_COLS))
+        rows = np.zeros((nb, fields.BODY_COLS))
         rows[:n, 0] = m.body_inv_mass * mov
         rows[:n, 1:4] = m.body_inv_inertia * mov[:, None]
         rows[:n, 4] = mov
@@ -111,7 +111,7 @@ class XPBDSolver:
         F.load_bodies(rows, int(kinematic is not None))
         nc = C.count
         if nc:
-            c = np.empty((nc, kernel.CONTACT_COLS))
+            c = np.empty((nc, fields.CONTACT_COLS))
             c[:, 0], c[:, 1], c[:, 2:5], c[:, 5:8], c[:, 8:11] = C.a, C.b, C.n, C.ra, C.rb
             c[:, 11], c[:, 12], c[:, 13], c[:, 14] = C.round_a, C.round_b, C.mu, C.e
             F.load_contacts(c)
