@@ -13,11 +13,9 @@ import taichi as ti
 
 from ..colliders import BOX, CAPSULE, PLANE, SPHERE
 from .sprites import TILE
+from .upsample import ND_F, ND_I1, ND_V4  # pixel arrays: flat, y·W + x
 
 vec3 = ti.types.vector(3, ti.f32)
-ND_V4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.f32), ndim=1)  # pixel arrays: flat, y·W + x
-ND_F = ti.types.ndarray(dtype=ti.f32, ndim=1)
-ND_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
 SKY_DEPTH = 1e30
 
 

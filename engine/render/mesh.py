@@ -23,13 +23,11 @@ import taichi as ti
 
 from ..launch import fast
 from .sprites import TILE
+from .upsample import ND_F, ND_I1, ND_V4  # pixel arrays: flat, y·W + x
 
 vec3 = ti.types.vector(3, ti.f32)
-ND_V4 = ti.types.ndarray(dtype=ti.types.vector(4, ti.f32), ndim=1)  # pixel arrays: flat, y·W + x
-ND_F = ti.types.ndarray(dtype=ti.f32, ndim=1)
 ND_I64 = ti.types.ndarray(dtype=ti.i64, ndim=1)
 ND_L2 = ti.types.ndarray(dtype=ti.types.vector(2, ti.i64), ndim=1)
-ND_I1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
 NEAR = 0.05
 DEPTH_BIAS = 0.01  # m: cloth resting on the ground would z-fight it
 EMPTY = (1 << 63) - 1  # no triangle at this pixel
