@@ -26,6 +26,7 @@ one the engine allocated with the annotated type.
 """
 from __future__ import annotations
 
+import contextlib
 import weakref
 
 import numpy as np
@@ -64,14 +65,17 @@ def _same(check, v) -> bool:
 class FastKernel:
     """``FastKernel(kernel)(*args)``: the kernel's result, as ``kernel(*args)``."""
 
-    def __init__(self, kernel, usual=None):
+    def __init__(self, kernel, usual=None, lean=False):
         from taichi.lang.util import cook_dtype
         from taichi.types.utils import is_signed
         from taichi.lang.matrix import VectorType
         from taichi.types import ndarray_type, primitive_types, template
 
         self.kernel = kernel
-        self._usual = usual if usual is not None else kernel  # the usual call, Taichi's checks and all
+        usual = usual if usual is not None else kernel  # the usual call, Taichi's checks and all
+        # lean: every compile of this kernel without Taichi's whole-kernel CSE (runtime)
+        self._compiling = _lean if lean else contextlib.nullcontext
+        self._usual = usual if not lean else (lambda *args: _lean_call(usual, args))
         self._kinds = None
         prim = getattr(kernel, "_primal", None)
         kinds = []
@@ -171,8 +175,21 @@ class FastKernel:
                 self._bound.clear()
             cpp = self._prim.compiled_kernels[self._prim.ensure_compiled(*args)]
             checks = tuple(c for _, c in pins) if pins else ()
-            self._bound[key] = (prog, sig, checks, cpp, prog.compile_kernel(prog.config(), prog.get_device_caps(), cpp))
+            with self._compiling():  # (the compile above, found again: the same config)
+                data = prog.compile_kernel(prog.config(), prog.get_device_caps(), cpp)
+            self._bound[key] = (prog, sig, checks, cpp, data)
         return out
+
+
+def _lean():
+    from .runtime import without_kernel_cse
+
+    return without_kernel_cse()
+
+
+def _lean_call(usual, args):
+    with _lean():
+        return usual(*args)
 
 
 _ALL = weakref.WeakSet()  # every FastKernel with bindings to drop when the program is reset
@@ -194,8 +211,9 @@ def _forget_all() -> None:
         fk._bound = {}
 
 
-def fast(kernel) -> FastKernel:
-    return FastKernel(kernel)
+def fast(kernel, lean: bool = False) -> FastKernel:
+    """``lean``: compiled without Taichi's whole-kernel CSE (engine.runtime.without_kernel_cse)."""
+    return FastKernel(kernel, lean=lean)
 
 
 def fast_method(cls, name: str) -> FastKernel:

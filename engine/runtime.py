@@ -299,6 +299,26 @@ def cfg_optimized():
         cfg.cfg_optimization = before
 
 
+@contextlib.contextmanager
+def without_kernel_cse():
+    """Taichi's whole-kernel common-subexpression pass off for the kernels compiled inside (its
+    ``opt_level`` 0; ``init`` keeps 1). The pass compares statements pairwise over a task, so it
+    grows with the square of a task's size: it was 97 of the 108 s that the rigid step with
+    coupled joints (the lantern's one-launch ``whole``, engine.rigid.kernel) took to compile cold
+    (Taichi's scoped profiler, 2026-11-28). LLVM's GVN and EarlyCSE merge the same expressions
+    afterwards. A kernel must always compile under the same setting (it is part of the cache
+    key), so a kernel that uses this is compiled inside it every time (engine.launch's
+    ``lean``). It moved the bytes of some scenes when set for every kernel, so only the kernels
+    whose output it leaves unchanged use it (tests/test_rigid.py holds their bytes)."""
+    cfg = ti.lang.impl.current_cfg()
+    before = cfg.opt_level
+    cfg.opt_level = 0
+    try:
+        yield
+    finally:
+        cfg.opt_level = before
+
+
 def on_reset(hook) -> None:
     """Register a function that drops a cache of fields/kernels when the program is reset."""
     _reset_hooks.append(hook)

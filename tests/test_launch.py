@@ -185,3 +185,38 @@ def test_a_data_oriented_method_launches_fast_with_its_owner_first():
     with pytest.raises(Exception, match="missing"):  # refused as obj.add(1) is refused
         fm(c1, 1)
     assert c1.v.to_numpy().tolist() == [3, 6, 9]  # (a refused call changed nothing)
+
+
+@ti.kernel
+def _lean_sum(out: ti.types.ndarray(dtype=ti.f32, ndim=1), s: ti.f32):
+    for i in range(out.shape[0]):
+        out[i] = (i * s + s) * (i * s + s)  # the same expression twice: what the CSE pass merges
+
+
+def test_a_lean_kernel_compiles_without_the_cse_pass_and_leaves_the_setting_as_it_was(monkeypatch):
+    """``lean``: every compile of the kernel (the usual call, and the binding's compile of the same
+    kernel) runs with Taichi's opt_level at 0, and the setting is back after it, a refused call
+    included; later calls take the binding; the results are the plain kernel's."""
+    from taichi.lang import impl, kernel_impl
+
+    seen = []
+    usual_launch = kernel_impl.Kernel.launch_kernel
+
+    def spy(self, *args, **kwargs):
+        seen.append(impl.current_cfg().opt_level)
+        return usual_launch(self, *args, **kwargs)
+
+    monkeypatch.setattr(kernel_impl.Kernel, "launch_kernel", spy)
+    before = impl.current_cfg().opt_level
+    assert before > 0  # (engine.runtime.init keeps Taichi's default)
+    lean, plain = FastKernel(_lean_sum, lean=True), FastKernel(_lean_sum)
+    for s in (0.5, 1.25, -3.0):
+        got, want = np.empty(5, np.float32), np.empty(5, np.float32)
+        lean(got, s)
+        assert impl.current_cfg().opt_level == before
+        plain(want, s)
+        assert np.array_equal(got, want), s
+    assert seen == [0, before]  # one usual call each: the rest took their bindings
+    with pytest.raises(Exception):
+        lean(np.empty(5, np.float64), 1.0)  # another dtype: refused by the usual path, in the switch
+    assert impl.current_cfg().opt_level == before

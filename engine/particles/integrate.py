@@ -88,6 +88,11 @@ class ParticleIntegrator:
         self.adaptive = bool(adaptive)
         self.colliders = colliders
         self.located = self.has_colliders and impacts == "located"
+        # Located impacts against boxes and capsules (rigid bodies' shapes) make the step kernels
+        # long: compiled without Taichi's whole-kernel CSE, whose cost grows with the square of a
+        # kernel's size (debris' step_fixed: 83 -> 26 s cold; engine.runtime.without_kernel_cse).
+        # Planes and spheres keep it: the 4M bench step ran ~10 % faster with it (2026-11-28).
+        self.lean = self.located and any(s.kind in ("box", "capsule") for s in colliders.specs)
         self.events = bool(events)
         self.record = bool(contacts) and self.has_colliders
         # the records the API drains (engine.contacts: slot, collider, located position and time)
@@ -267,7 +272,19 @@ def count_alive(alive: ti.template(), n: ti.i32) -> ti.i32:
     return c
 
 
-# launched without Taichi's per-call Python (engine.launch: the integrator is a template argument,
-# bound by a weak reference; several a frame in every particle scene)
-step_fixed, step_fixed_run, attempt, commit, count_alive = (
-    fast(k) for k in (step_fixed, step_fixed_run, attempt, commit, count_alive))
+def _by_integrator(kernel):
+    """``kernel(I, *args)`` launched without Taichi's per-call Python (engine.launch: the
+    integrator is a template argument, bound by a weak reference; several a frame in every
+    particle scene), compiled lean where ``I.lean`` (above)."""
+    plain, lean = fast(kernel), fast(kernel, lean=True)
+
+    def launch(I, *args):
+        return (lean if I.lean else plain)(I, *args)
+
+    launch.__name__ = launch.__qualname__ = kernel.__name__
+    return launch
+
+
+step_fixed, step_fixed_run, attempt, commit = (
+    _by_integrator(k) for k in (step_fixed, step_fixed_run, attempt, commit))
+count_alive = fast(count_alive)

@@ -315,8 +315,9 @@ def _build(F):
             for k in range(nc):
                 velocity_pass(k, h, glen)
 
-    # (launched without Taichi's per-call Python: engine.launch)
-    begin, joints, finish, whole = fast(begin), fast(joints), fast(finish), fast(whole)
+    # (launched without Taichi's per-call Python: engine.launch; compiled without Taichi's whole-
+    # kernel CSE, which took 97 of the 108 s of the lantern's cold compile: engine.runtime)
+    begin, joints, finish, whole = (fast(k, lean=True) for k in (begin, joints, finish, whole))
 
     def substeps(n, h, g, glen, nc, nj):
         """n substeps of h: in one launch (up to WHOLE_MAX_BODIES bodies), else a begin, then per
