@@ -132,7 +132,7 @@ def build_parser(extra=()) -> argparse.ArgumentParser:
     ls.set_defaults(func=lambda a: _commands().cmd_list(a), no_taichi=True)
 
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
-    b.add_argument("--quick", action="store_true", help="small sizes (CI: well under a minute)")
+    b.add_argument("--quick", action="store_true", help="small sizes, for tests (figures that only show the code runs; most of the time goes to compiling)")
     b.add_argument("--only", default=None,
                    help="comma-separated sections: step, frame, effects, ode, startup, features, "
                         "cloth, output, wedge, api")

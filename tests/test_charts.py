@@ -68,7 +68,7 @@ def _rows(path):
     return rows
 
 
-@pytest.mark.slow  # (the quick charts take a minute to compute)
+@pytest.mark.slow  # (the quick charts take minutes to compute)
 def test_quick_run_writes_every_csv_and_png(quick_charts):
     out, paths = quick_charts
     names = {p.split("/")[-1] for p in paths}
@@ -84,7 +84,7 @@ def test_quick_run_writes_every_csv_and_png(quick_charts):
         assert fh.readline().strip().split(",") == FIELDS
 
 
-@pytest.mark.slow  # (the quick charts take a minute to compute)
+@pytest.mark.slow  # (the quick charts take minutes to compute)
 def test_fixed_step_slopes_on_drag(quick_charts):
     out, _ = quick_charts
     rows = _rows(out / "workprec_projectile_drag.csv")
@@ -93,7 +93,7 @@ def test_fixed_step_slopes_on_drag(quick_charts):
     assert fixed_slope(rows, "midpoint") == pytest.approx(-2.0, abs=0.15)
 
 
-@pytest.mark.slow  # (the quick charts take a minute to compute)
+@pytest.mark.slow  # (the quick charts take minutes to compute)
 def test_kepler_adaptive_rk4_beats_fixed_rk4_at_1e_5(quick_charts):
     out, _ = quick_charts
     rows = _rows(out / "workprec_kepler.csv")
@@ -105,7 +105,7 @@ def test_kepler_adaptive_rk4_beats_fixed_rk4_at_1e_5(quick_charts):
     assert min(adaptive) < min(fixed) / 5  # NUMERICS.md: ~2,840 against ~64,000
 
 
-@pytest.mark.slow  # (the quick charts take a minute to compute)
+@pytest.mark.slow  # (the quick charts take minutes to compute)
 def test_workprec_rows_are_sane(quick_charts):
     out, _ = quick_charts
     rows = _rows(out / "workprec_lotka-volterra.csv")
@@ -121,7 +121,7 @@ def test_workprec_rows_are_sane(quick_charts):
     assert all(math.isfinite(r["wall_s"]) and r["wall_s"] >= 0 for r in rows)
 
 
-@pytest.mark.slow  # (the quick charts take a minute to compute)
+@pytest.mark.slow  # (the quick charts take minutes to compute)
 def test_stability_and_energy_csv(quick_charts):
     out, _ = quick_charts
     with open(out / "stability.csv", newline="") as fh:
@@ -157,7 +157,7 @@ def test_damped_spring_closed_form():
     assert DAMPED_SPRING.y_end()[0] == pytest.approx(0.17509922, abs=1e-7)
 
 
-@pytest.mark.slow  # (the quick charts take a minute to compute)
+@pytest.mark.slow  # (the quick charts take minutes to compute)
 def test_step_doubling_evaluations_against_rk45_at_equal_error(quick_charts):
     # issue 14's target is 1.5× RK45's f-evaluations at equal error: met at loose tolerances on
     # Lotka–Volterra (measured 1.14–1.35 down to 1e-5), missed at tight ones (→ 2.1 at 5e-11: a
