@@ -73,9 +73,16 @@ class FastKernel:
 
         self.kernel = kernel
         usual = usual if usual is not None else kernel  # the usual call, Taichi's checks and all
-        # lean: every compile of this kernel without Taichi's whole-kernel CSE (runtime)
-        self._compiling = _lean if lean else contextlib.nullcontext
-        self._usual = usual if not lean else (lambda *args: _lean_call(usual, args))
+        self._compiling = contextlib.nullcontext
+        if lean:  # every compile of this kernel without Taichi's whole-kernel CSE (engine.runtime)
+            from .runtime import without_kernel_cse as compiling
+
+            def usual(*args, _usual=usual):
+                with compiling():
+                    return _usual(*args)
+
+            self._compiling = compiling
+        self._usual = usual
         self._kinds = None
         prim = getattr(kernel, "_primal", None)
         kinds = []
@@ -179,17 +186,6 @@ class FastKernel:
                 data = prog.compile_kernel(prog.config(), prog.get_device_caps(), cpp)
             self._bound[key] = (prog, sig, checks, cpp, data)
         return out
-
-
-def _lean():
-    from .runtime import without_kernel_cse
-
-    return without_kernel_cse()
-
-
-def _lean_call(usual, args):
-    with _lean():
-        return usual(*args)
 
 
 _ALL = weakref.WeakSet()  # every FastKernel with bindings to drop when the program is reset

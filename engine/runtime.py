@@ -308,8 +308,9 @@ def without_kernel_cse():
     (Taichi's scoped profiler, 2026-11-28). LLVM's GVN and EarlyCSE merge the same expressions
     afterwards. A kernel must always compile under the same setting (it is part of the cache
     key), so a kernel that uses this is compiled inside it every time (engine.launch's
-    ``lean``). It moved the bytes of some scenes when set for every kernel, so only the kernels
-    whose output it leaves unchanged use it (tests/test_rigid.py holds their bytes)."""
+    ``lean``). Only the largest kernels use it: the XPBD step and the particle steps that meet
+    boxes or capsules (README "Compile time"). It changes how their last bits round (crates' and
+    debris' frames differ from before it; lantern's do not); each stays deterministic."""
     cfg = ti.lang.impl.current_cfg()
     before = cfg.opt_level
     cfg.opt_level = 0

@@ -128,6 +128,7 @@ def test_scene_keeps_particles_out_of_plane_and_sphere():
         assert p[:, 1].min() >= -1e-5
         assert np.linalg.norm(p - [0.3, 0.6, 0.0], axis=1).min() >= 0.5 * (1 - 1e-5)
     assert s.particles.integrator.hits[None] > 1000
+    assert not s.particles.integrator.lean  # planes and spheres: compiled with it (engine.runtime)
 
 
 def test_single_particle_with_drag_matches_closed_form_rk4():
