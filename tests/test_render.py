@@ -208,10 +208,13 @@ def test_transparent_overlay_is_premultiplied_with_alpha_zero_where_nothing_is_d
 
 @pytest.mark.slow
 def test_render_into_a_given_array_and_refuse_a_wrong_one():
+    """Every pixel of ``out`` is written, whatever it held (the untouched tiles too: on the CPU
+    the frame starts as one copy of the packed background, which the composite then skips)."""
     s = _scene("configs/sparks.toml", frames=5, size=(96, 54))
-    out = np.zeros((54, 96, 4), np.uint8)
+    out = np.full((54, 96, 4), 0xAB, np.uint8)
     got = s.render(out=out)
-    assert got is out and out[..., :3].max() > 0 and np.array_equal(out, s.render())
+    assert got is out and out[..., :3].max() > 0 and np.array_equal(out, s.render(out=np.zeros_like(out)))
+    assert isinstance(s.renderer.targets(96, 54).bg_packed, np.ndarray)  # (the host copy was taken)
     for bad in (np.zeros((54, 96, 3), np.uint8), np.zeros((54, 96, 4), np.float32),
                 np.zeros((96, 54, 4), np.uint8), np.zeros((54, 192, 4), np.uint8)[:, ::2]):
         with pytest.raises(ValueError, match="out"):

@@ -153,14 +153,16 @@ def _build(uses_add: bool, uses_alpha: bool):
 
     @ti.kernel
     def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, bgc: ND_V4, dep: ND_F,
-                        bg_packed: ND_U64, out: ND_U32, out64: ND_U64, wide: ti.i32, dirty: ND_I1,
+                        bg_packed: ND_U64, out: ND_U32, out64: ND_U64, copy: ti.i32, dirty: ND_I1,
                         dirty_prev: ND_I1,
                         touched_lo: ND_I1, edges: ND_I1, ex0: ti.i32, ey0: ti.i32, ex1: ti.i32,
                         ey1: ti.i32, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
                         Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
                         shading: ti.f32, mode: ti.i32):
         """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
-        the background, tone-mapped and packed. An untouched tile copies the packed background.
+        the background, tone-mapped and packed. An untouched tile copies the packed background
+        (``copy`` 0: pixel by pixel; 1: two pixels an element, through ``out64``; 2: not at all,
+        the caller has filled ``out`` with it in one memcpy: ``targets.host_copy``).
 
         ``edges`` (TX·TY,) caches ``tile_is_edge`` per tile (−1: not known), for it depends on the
         depths alone, which change only where the background was redrawn — the tiles
@@ -183,7 +185,9 @@ def _build(uses_add: bool, uses_alpha: bool):
             if has_lo != 0:
                 near = lo_near(px0, py0, px1, py1, touched_lo, Wl, Hl, TXl, s)
             if n == 0 and near == 0 and dirty[t] == 0:
-                if wide != 0 and px1 - px0 == TILE - 1:
+                if copy == 2:
+                    pass
+                elif copy == 1 and px1 - px0 == TILE - 1:
                     # two pixels an element: Taichi's CPU code pays per ndarray element, not per
                     # byte (a tile-ordered copy at 1280×720, one thread: u32 3.4–3.9 ms, u64
                     # 1.0–1.1 ms in a micro-benchmark; the empty frame's composite ~1 ms less)
