@@ -39,6 +39,7 @@ from .particles.capacity import MAX_POOL
 from .clock import FixedTimestep
 from .config import ConfigError, config_data
 from .contacts import Contacts
+from .ode.driver import substeps
 from .render.camera import Camera
 from .scene import Scene
 
@@ -194,7 +195,7 @@ class ParticleScene(SceneEdits, RigidAPI, SoftBodyAPI, PotentialAPI):
                              f"(FixedTimestep does) or build the scene with a larger max_dt")
         sol = self.cfg.solver
         if not sol.adaptive and s.particles is not None and dt / sol.h > MAX_STEPS_PER_CALL:
-            raise ValueError(f"step: dt: {dt!r} s is {math.ceil(dt / sol.h):,} steps of solver.h = {sol.h:g} s; "
+            raise ValueError(f"step: dt: {dt!r} s is {substeps(dt, sol.h):,} steps of solver.h = {sol.h:g} s; "
                              f"at most {MAX_STEPS_PER_CALL:,} per call")
         if self._interpolate:
             s.save_positions()

@@ -121,7 +121,9 @@ def estimate(cfg, width: int, height: int, frames_in_flight: int, body_substeps=
     parts["frames in flight"] = pixels * 4 * frames_in_flight
     # Steps: fixed steps are exact (equal substeps landing on each frame); adaptive runs start at
     # h and the controller may grow it, so h is the estimate's step there too.
-    per_frame = max(1, math.ceil(frame_dt / cfg.solver.h - 1e-9)) if slots else 0
+    from engine.ode.driver import substeps
+
+    per_frame = substeps(frame_dt, cfg.solver.h) if slots else 0
     steps = [per_frame * frames]
     work = slots * per_frame * frames
     for k, (b, n) in enumerate(zip(cfg.bodies, nodes)):

@@ -5,7 +5,6 @@ the reader of stdout went away (a pipe into ``head``)."""
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import signal
 import sys
@@ -30,7 +29,9 @@ def _cmd_ode(args) -> int:
     t1 = args.t_end if args.t_end is not None else p.t_span[1]
     if not t1 > t0:
         raise UserError(f"--t-end: {t1:g} is not allowed: must be after the start t={t0:g}")
-    steps = math.ceil((t1 - t0) / args.h - 1e-9)
+    from engine.ode.driver import substeps
+
+    steps = substeps(t1 - t0, args.h)
     if args.tol is None and steps > args.max_steps:
         raise UserError(f"--max-steps: --h {args.h:g} from t={t0:g} to {t1:g} is {steps:,} steps, "
                         f"over the limit of {args.max_steps:,}; raise --h or --max-steps")

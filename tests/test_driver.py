@@ -6,7 +6,7 @@ import pytest
 
 from engine import runtime
 from engine.ode.driver import (NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS, Driver, SimulationDiverged,
-                               StepPolicy, clip_to_target)
+                               StepPolicy, clip_to_target, substeps)
 
 
 class Decay:
@@ -63,6 +63,20 @@ def test_fixed_steps_are_equal_and_land_exactly():
     hs = [c[2] for c in steps(sys, "fixed")]
     assert len(hs) == 4 and hs == [0.25] * 4 and d.step_sizes == hs
     assert sys.y == pytest.approx(0.75 ** 4)
+
+
+def test_an_h_written_to_seven_digits_takes_the_steps_it_means():
+    """h = 0.008333333 (1/120 to seven digits) is 2 steps a 1/60 s frame and 4 a 1/30 s one, not
+    3 and 5 (span / h = 2.00000008 rounded up); past a relative 1e-6 of a whole number, h is an
+    upper bound again; counts in the billions stay exact."""
+    assert [substeps(1 / 60, 0.008333333), substeps(1 / 30, 0.008333333)] == [2, 4]
+    assert [substeps(1 / 60, 0.004166667), substeps(1 / 30, 0.016666667)] == [4, 2]
+    assert substeps(2 * 0.008333333 * (1 + 2e-6), 0.008333333) == 3  # (beyond the tolerance)
+    assert [substeps(1.0, 0.3), substeps(0.1, 1.0), substeps(10.0, 1e-9)] == [4, 1, 10_000_000_000]
+    sys = Decay()
+    d = Driver(sys, StepPolicy(h=0.008333333))
+    d.advance(0.0, 1 / 60)
+    assert d.step_sizes == [1 / 120, 1 / 120]
 
 
 def test_adaptive_lands_on_target_controls_error_and_resumes_after_clip():

@@ -20,8 +20,8 @@ and diffrax's ``diffeqsolve`` split the work the same way). The protocol:
   before going on. The built-in systems do not use it: their impacts are located per element
   inside the step (:mod:`engine.ode.events`), so a pool's step is not cut once per contact.
 
-Policy, one for all systems (:class:`StepPolicy`): fixed steps are ceil(span/h) equal substeps
-landing exactly on the target; adaptive steps start from the policy's h (or the system's
+Policy, one for all systems (:class:`StepPolicy`): fixed steps are :func:`substeps` (span, h)
+equal substeps landing exactly on the target; adaptive steps start from the policy's h (or the system's
 ``first_step``), are clipped to land on the target without a sliver (:func:`clip_to_target`),
 resume after a clipped landing from the step the controller wanted before clipping, stay at most
 ``h_max``, count every attempt against ``max_steps`` per advance, and give up with
@@ -37,6 +37,22 @@ from typing import Optional
 
 from ..runtime import check_stop
 from .controller import StepDoublingController
+
+H_REL_TOL = 1e-6  # span / h this close (relatively) to a whole number counts as that number
+
+
+def substeps(span: float, h: float) -> int:
+    """How many equal substeps of about h (s) cover ``span`` (s): ceil(span / h), except that a
+    span / h within a relative 1e-6 of a whole number n is n steps — so an h written to seven
+    digits lands as it was meant: h = 0.008333333 (1/120) takes a 1/60 s frame in 2 steps, not 3
+    of 1/180 s (span / h = 2.00000008), and a 1/30 s frame in 4, not 5. A step is then at most
+    h·(1 + 1e-6) long. Every fixed-step count in the engine (particles, soft bodies, rigid bodies,
+    the coupler, the run's estimates) comes from here."""
+    x = span / h
+    n = round(x)
+    if n >= 1 and abs(x - n) <= H_REL_TOL * x:
+        return n
+    return max(1, math.ceil(x))
 
 NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS = "nonfinite", "step_too_small", "too_many_steps"
 
@@ -127,7 +143,7 @@ class Driver:
         self.step_sizes.append(h)
 
     def _fixed(self, t: float, t_end: float) -> None:
-        n = max(1, math.ceil((t_end - t) / self.policy.h - 1e-9))
+        n = substeps(t_end - t, self.policy.h)
         h = (t_end - t) / n  # equal substeps that land exactly on the target
         self.step_sizes = []
         j = 0

@@ -10,11 +10,10 @@ impulse or a pose is set.
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
-from ..ode.driver import DriverStats, SimulationDiverged
+from ..ode.driver import DriverStats, SimulationDiverged, substeps
 from ..paths import sample_path
 from ..system import SystemBase
 from . import broad, collide, quat
@@ -71,7 +70,7 @@ class RigidSystem(SystemBase):
         if self.ode is not None:
             self.ode.advance(t0, t1, g)
         else:
-            n = max(1, math.ceil((t1 - t0) / self.settings.h - 1e-9))
+            n = substeps(t1 - t0, self.settings.h)
             h = (t1 - t0) / n
             for k in range(n):
                 self._xpbd_step(t0 + k * h, h, g)

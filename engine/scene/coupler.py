@@ -1,9 +1,9 @@
 """The coupler: steps a scene's systems together in coupling steps (engine.system's rules)."""
 from __future__ import annotations
 
-import math
 from typing import Iterator, List, Sequence, Tuple
 
+from ..ode.driver import substeps
 from ..system import Coupling, System
 
 
@@ -36,7 +36,7 @@ class Coupler:
         if not self.coupled or not self.max_step or t1 - t0 <= self.max_step:
             yield t0, t1
             return
-        n = math.ceil((t1 - t0) / self.max_step - 1e-9)
+        n = substeps(t1 - t0, self.max_step)
         h = (t1 - t0) / n
         for j in range(n):
             yield t0 + j * h, (t1 if j == n - 1 else t0 + (j + 1) * h)

@@ -23,7 +23,7 @@ from ..contacts import ContactBuffer
 from ..control import ColliderInput, Control
 from ..forces.elements import ElementGroup
 from ..forces.fields import PointForces
-from ..ode.driver import Driver, SimulationDiverged, StepPolicy
+from ..ode.driver import Driver, SimulationDiverged, StepPolicy, substeps
 from ..ode.methods import INTEGRATORS as ODE_INTEGRATORS
 from ..ode.staged import FieldStepper, StagedDoubling, copy_nodes
 from ..runtime import _arch_in_use, ensure_init
@@ -191,7 +191,7 @@ class SpringSystem:
             return auto_substeps(self.integrator, dt, self.bounds)
         if isinstance(self.substeps, int):
             return self.substeps
-        return max(1, math.ceil(dt / self.h - 1e-9)) if self.h else 1
+        return substeps(dt, self.h) if self.h else 1
 
     def step(self, dt: float) -> None:
         """Advance by dt seconds (a frame of any length), landing exactly on time + dt."""
