@@ -194,7 +194,7 @@ class ParticleScene(SceneEdits, RigidAPI, SoftBodyAPI, PotentialAPI):
             raise ValueError(f"step: dt: {dt!r} s is longer than max_dt = {self.max_dt:g} s: step in pieces "
                              f"(FixedTimestep does) or build the scene with a larger max_dt")
         sol = self.cfg.solver
-        if not sol.adaptive and s.particles is not None and dt / sol.h > MAX_STEPS_PER_CALL:
+        if not sol.adaptive and s.particles is not None and substeps(dt, sol.h) > MAX_STEPS_PER_CALL:
             raise ValueError(f"step: dt: {dt!r} s is {substeps(dt, sol.h):,} steps of solver.h = {sol.h:g} s; "
                              f"at most {MAX_STEPS_PER_CALL:,} per call")
         if self._interpolate:

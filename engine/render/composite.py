@@ -162,7 +162,7 @@ def _build(uses_add: bool, uses_alpha: bool):
         """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
         the background, tone-mapped and packed. An untouched tile copies the packed background
         (``copy`` 0: pixel by pixel; 1: two pixels an element, through ``out64``; 2: not at all,
-        the caller has filled ``out`` with it in one memcpy: ``targets.host_copy``).
+        the caller has filled ``out`` with it in one memcpy: ``targets.untouched_tiles``).
 
         ``edges`` (TX·TY,) caches ``tile_is_edge`` per tile (−1: not known), for it depends on the
         depths alone, which change only where the background was redrawn — the tiles

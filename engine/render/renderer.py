@@ -30,7 +30,7 @@ from .binning import build_binning_kernels, chunks_for
 from .composite import build_composite_kernels
 from .resolution import CO_MIN_TEXELS, LO_MIN_TEXELS, particle_scale
 from .sprites import TILE, Look, SpriteRecords, build_sprite_kernel
-from .targets import FrameTargets, host_copy, packed_view, wide_view
+from .targets import FrameTargets, packed_view, untouched_tiles
 
 SCHEDULES = ("tiles", "pixels")
 MAX_SIZES_KEPT = 4  # image sizes whose buffers a Renderer keeps (least recently used dropped)
@@ -199,11 +199,8 @@ class Renderer:
             if rect is not None:
                 ex0, ey0 = rect[0] // TILE - 1, rect[1] // TILE - 1
                 ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
-            wide64, copy = wide_view(image)
-            if host_copy(t, packed):
-                copy = 2  # (untouched tiles already hold the background)
             self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, bgc, dep, t.bg_packed,
-                                       packed, wide64, copy, t.dirty, t.dirty_prev if t.mesh else t.dirty,
+                                       packed, *untouched_tiles(t, image, packed), t.dirty, t.dirty_prev if t.mesh else t.dirty,
                                        t.touched_lo, t.edges, ex0, ey0, ex1, ey1, *common)
         else:
             self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,

@@ -5,7 +5,7 @@ arguments, so a new render size allocates arrays and compiles nothing (fields pa
 Per pixel (H·W,), flat in row-major order: ``bgc`` vec4 (background RGB, coverage 0) and ``depth`` f32 (m) — kept while the
 camera, colliders and size stay; ``bg_packed`` ((H·W + 1) // 2,) u64, the background tone-mapped,
 two pixels to an element (what an untouched tile shows; in host memory, a numpy array, on the
-CPU: ``host_copy``). The splat arrays hold the full level's W·H pixels, then the reduced level's
+CPU: ``untouched_tiles``). The splat arrays hold the full level's W·H pixels, then the reduced level's
 Wl·Hl texels (Hl, Wl = ceil(scale · (H, W))), then the coarse level's Wc·Hc texels (at half the
 reduced scale; engine.render.composite): ``depth`` (the reduced parts: the farthest depth under
 each texel), ``accA``/``accB`` vec4 splat accumulators (engine.render.splat), written only in tiles
@@ -64,7 +64,7 @@ class FrameTargets:
         self.bgc = ti.ndarray(vec4, shape=px)
         self.depth = ti.ndarray(ti.f32, shape=both)
         # two pixels to an element; on the CPU a numpy array (the kernels take it all the same,
-        # without a copy) so that the frame can start as one memcpy of it (``host_copy``)
+        # without a copy) so that the frame can start as one memcpy of it (``untouched_tiles``)
         self.bg_packed = (np.zeros((px + 1) // 2, np.uint64) if host
                           else ti.ndarray(ti.u64, shape=(px + 1) // 2))
         self.accA = ti.ndarray(vec4, shape=both)
@@ -122,17 +122,20 @@ def packed_view(image: np.ndarray, W: int, H: int, name: str = "out") -> np.ndar
 _NO_WIDE = np.zeros(1, np.uint64)
 
 
-def host_copy(t: FrameTargets, packed: np.ndarray) -> bool:
-    """Fill the flat (H·W,) u32 image ``packed`` with the packed background in one memcpy, where
-    ``t.bg_packed`` lives in host memory and its u32 halves are in pixel order (little-endian);
-    returns whether it did. The composite then leaves untouched tiles as they are: numpy copies
-    the 3.7 MB of a 1280×720 frame in ~0.17 ms on this 2-core machine, the composite's own
-    per-tile copy took 0.7–1.7 ms (short runs of 8 elements a row, each store making the next
-    load re-read its array's address)."""
-    if not isinstance(t.bg_packed, np.ndarray) or sys.byteorder != "little":
-        return False
-    np.copyto(packed, t.bg_packed.view(np.uint32)[: packed.shape[0]])
-    return True
+def untouched_tiles(t: FrameTargets, image: np.ndarray, packed: np.ndarray):
+    """How the composite shows the tiles nothing touches: its ``(out64, copy)`` arguments.
+
+    Where ``t.bg_packed`` lives in host memory and its u32 halves are in pixel order
+    (little-endian), the flat (H·W,) u32 image ``packed`` is filled with it here in one memcpy and
+    the composite leaves those tiles alone (copy 2): numpy copies the 3.7 MB of a 1280×720 frame
+    in ~0.17 ms on this 2-core machine, the composite's own per-tile copy took 0.7–1.7 ms (short
+    runs of 8 elements a row, each store making the next load re-read its array's address).
+    Elsewhere the composite copies them itself, two pixels an element where ``wide_view`` allows
+    (copy 1), else pixel by pixel (copy 0)."""
+    if isinstance(t.bg_packed, np.ndarray) and sys.byteorder == "little":
+        np.copyto(packed, t.bg_packed.view(np.uint32)[: packed.shape[0]])
+        return _NO_WIDE, 2
+    return wide_view(image)
 
 
 def wide_view(image: np.ndarray):

@@ -10,7 +10,6 @@ impulse or a pose is set.
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..ode.driver import DriverStats, SimulationDiverged, substeps
