@@ -125,8 +125,10 @@ class SoftBody(SystemBase):
         return self.system.driver.stats
 
     def drawables(self) -> dict:
+        # ``position_field``: the nodes' own field, which the renderer's mesh pass reads in its
+        # launch (engine.render.mesh) instead of a to_numpy and a from_numpy a frame
         return dict(kind="mesh", positions=self.positions, triangles=self.triangles, lines=self.lines,
-                    color=self.cfg.color)
+                    color=self.cfg.color, position_field=self.system.state.node_pos)
 
     def energy(self) -> dict:
         return self.system.energy()

@@ -353,3 +353,40 @@ def test_cached_edge_flags_follow_a_moving_body():
         assert np.array_equal(_fresh_edges(s, t), img), k
     assert changed > 0  # the jelly made some tile's upsample bilateral on its way (not vacuous)
     s.close()
+
+
+class _NoField:
+    """A body as a host's own drawable would be: its vertices through ``positions`` only."""
+
+    def __init__(self, body):
+        self.body = body
+
+    def drawables(self):
+        d = dict(self.body.drawables())
+        d.pop("position_field")
+        return d
+
+
+@pytest.mark.parametrize("path", ["configs/cloth.toml", "configs/chain.toml"])
+def test_the_mesh_pass_reads_soft_bodies_nodes_as_positions_gives_them(path):
+    """A soft body's mesh pass copies the nodes from the body's own field inside its launch (no
+    to_numpy / from_numpy a frame); the image is the one drawn through ``positions`` — for the
+    body alone, and drawn twice, once through its field and once through ``positions`` (the
+    host path then writes every row) — frame after frame as the body moves. Checked to fail with the copy left out
+    of the pass (the drawn body stays where it was built)."""
+    s = _scene(path, frames=0, size=(192, 108))
+    body = s.bodies[0]
+    assert s.renderer.mesh.fields and not s.renderer.mesh.host_copy
+    host = Renderer(None, [], s.colliders, s.cfg.render, bodies=[_NoField(body)])
+    mixed = Renderer(None, [], s.colliders, s.cfg.render, bodies=[body, _NoField(body)])
+    twice = Renderer(None, [], s.colliders, s.cfg.render, bodies=[_NoField(body), _NoField(body)])
+    assert host.mesh.host_copy and mixed.mesh.host_copy and len(mixed.mesh.fields) == 1
+    first = None
+    for k in range(4):
+        for _ in range(8):
+            s.advance_frame()
+        img = s.render(192, 108).copy()
+        assert np.array_equal(img, host.render(s.camera, 192, 108)), k
+        assert np.array_equal(twice.render(s.camera, 192, 108), mixed.render(s.camera, 192, 108)), k
+        first = img if first is None else first
+    assert not np.array_equal(first, img)  # the body moved (not vacuous)

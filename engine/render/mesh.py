@@ -41,7 +41,9 @@ class MeshLayer:
     def __init__(self, bodies):
         """``bodies``: anything drawn as a mesh, through its ``drawables()``: ``positions`` (a
         callable giving (V, 3) world vertices at draw time), ``triangles`` (T, 3), ``lines``
-        (L, 2) and ``color`` ((3,) for all vertices or (V, 3))."""
+        (L, 2) and ``color`` ((3,) for all vertices or (V, 3)); optionally ``position_field``, a
+        Taichi vector field (≥ V rows, f32 or f64) holding the same vertices for the body's whole
+        life, which the mesh pass copies in its own launch (soft bodies' nodes)."""
         self.bodies = list(bodies)
         self.draws = [b.drawables() for b in self.bodies]
         nv = [len(d["positions"]()) for d in self.draws]
@@ -52,6 +54,11 @@ class MeshLayer:
         self.tris = np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32)
         self.lines = np.concatenate(lines).astype(np.int32) if lines else np.zeros((0, 2), np.int32)
         self.tri_count, self.line_count = len(self.tris), len(self.lines)
+        # (field, first vertex, vertices) of the bodies whose vertices the pass copies itself; the
+        # others come through ``positions`` (``update``)
+        self.fields = tuple((d["position_field"], int(o), k) for d, o, k in zip(self.draws, offsets, nv)
+                            if d.get("position_field") is not None and k > 0)
+        self.host_copy = len(self.fields) < sum(1 for k in nv if k > 0)
         n = max(1, self.nv)
         self.mesh_pos = ti.Vector.field(3, ti.f32, shape=n)
         self.mesh_nrm = ti.Vector.field(3, ti.f32, shape=n)
@@ -78,8 +85,11 @@ class MeshLayer:
         self._frame = fast(_build(self))  # (engine.launch)
 
     def update(self) -> None:
-        """Copy the bodies' node positions in (``draw`` recomputes the vertex normals)."""
-        if self.nv:
+        """Copy the bodies' node positions in (``draw`` recomputes the vertex normals): nothing
+        to do when every body gives its ``position_field`` (``draw`` copies those), else every
+        body's ``positions`` through NumPy (those fields' rows then copied over with the same
+        values)."""
+        if self.host_copy:
             pos = np.concatenate([d["positions"]() for d in self.draws]).astype(np.float32)
             self.mesh_pos.from_numpy(pos)
 
@@ -97,6 +107,7 @@ def _build(m: MeshLayer):
     tri_count, line_count, nv = m.tri_count, m.line_count, max(1, m.nv)
     adj_tri = getattr(m, "adj_tri", None)
     adj_start = getattr(m, "adj_start", None)
+    fields = m.fields
 
     @ti.func
     def project(p, o, f, r, u, th, W, H):
@@ -273,7 +284,11 @@ def _build(m: MeshLayer):
         """A frame's meshes in one launch: vertex normals, then the buffers cleared, the
         triangles and lines rasterised and the touched tiles shaded — each a parallel loop at
         the kernel's top level, run one after another (they were four or five launches, each
-        ~0.1 ms here whatever its work)."""
+        ~0.1 ms here whatever its work; the bodies' own fields are copied in first, rounded to
+        f32 as NumPy's astype rounds them)."""
+        for src, first, count in ti.static(fields):
+            for j in range(count):
+                P[first + j] = ti.cast(src[j], ti.f32)
         if ti.static(tri_count > 0):
             normals()
         clear(vis, acc, dirty, dirty_prev, H, W, TX, TX * TY, whole)
