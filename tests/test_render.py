@@ -367,7 +367,8 @@ class _NoField:
         return d
 
 
-@pytest.mark.parametrize("path", ["configs/cloth.toml", "configs/chain.toml"])
+@pytest.mark.parametrize("path", ["configs/cloth.toml",
+                                  pytest.param("configs/chain.toml", marks=pytest.mark.slow)])
 def test_the_mesh_pass_reads_soft_bodies_nodes_as_positions_gives_them(path):
     """A soft body's mesh pass copies the nodes from the body's own field inside its launch (no
     to_numpy / from_numpy a frame); the image is the one drawn through ``positions`` — for the
