@@ -25,7 +25,8 @@ same way; see ``../shared/ARCHITECTURE.md``). The contract, in numbered rules (s
    exchange data inside a frame). With nothing coupled the coupling step is the frame, so a scene
    of independent systems steps exactly as each would alone: the same bytes.
 5. ``reset()`` puts it back as built (t = 0, the config's inputs), keeping fields and kernels.
-6. ``drawables()`` → dict for the renderer (what to draw, never the system itself).
+6. ``drawables()`` → dict for the renderer (what to draw: arrays, callables, a field it may
+   read; never the system itself).
 7. ``contacts(names)`` drains its contact records (:class:`~engine.contacts.Contacts`);
    ``energy()`` → dict of named terms (J, plus ``t``); ``stats`` holds its own step counts
    (:class:`~engine.ode.driver.DriverStats`).

@@ -58,6 +58,10 @@ class MeshLayer:
         # others come through ``positions`` (``update``)
         self.fields = tuple((d["position_field"], int(o), k) for d, o, k in zip(self.draws, offsets, nv)
                             if d.get("position_field") is not None and k > 0)
+        for f, _o, k in self.fields:  # (the pass reads rows [0, k) of it: none may be missing)
+            if len(f.shape) != 1 or f.shape[0] < k:
+                raise ValueError(f"drawables: position_field holds {f.shape} rows, fewer than the "
+                                 f"{k} vertices its positions give")
         self.host_copy = len(self.fields) < sum(1 for k in nv if k > 0)
         n = max(1, self.nv)
         self.mesh_pos = ti.Vector.field(3, ti.f32, shape=n)
