@@ -54,17 +54,21 @@ class MeshLayer:
         self.tris = np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32)
         self.lines = np.concatenate(lines).astype(np.int32) if lines else np.zeros((0, 2), np.int32)
         self.tri_count, self.line_count = len(self.tris), len(self.lines)
-        # (field, first vertex, vertices) of the bodies whose vertices the pass copies itself; the
-        # others come through ``positions`` (``update``)
-        self.fields = tuple((d["position_field"], int(o), k) for d, o, k in zip(self.draws, offsets, nv)
-                            if d.get("position_field") is not None and k > 0)
+        # (field, first vertex, vertices) of the bodies whose vertices the pass copies itself, and
+        # (positions, first vertex, vertices) of the others, copied in through NumPy (``update``)
+        placed = [(d, int(o), k) for d, o, k in zip(self.draws, offsets, nv) if k > 0]
+        self.fields = tuple((d["position_field"], o, k) for d, o, k in placed
+                            if d.get("position_field") is not None)
+        self.host_rows = tuple((d["positions"], o, k) for d, o, k in placed if d.get("position_field") is None)
         for f, _o, k in self.fields:  # (the pass reads rows [0, k) of it: none may be missing)
             if len(f.shape) != 1 or f.shape[0] < k:
                 raise ValueError(f"drawables: position_field holds {f.shape} rows, fewer than the "
                                  f"{k} vertices its positions give")
-        self.host_copy = len(self.fields) < sum(1 for k in nv if k > 0)
         n = max(1, self.nv)
         self.mesh_pos = ti.Vector.field(3, ti.f32, shape=n)
+        # the host's rows, kept between frames (the field bodies' rows in it stay 0: the pass
+        # writes those in mesh_pos itself, after ``update``'s from_numpy and before any read)
+        self._staged = np.zeros((n, 3), np.float32) if self.host_rows else None
         self.mesh_nrm = ti.Vector.field(3, ti.f32, shape=n)
         self.mesh_col = ti.Vector.field(3, ti.f32, shape=n)
         cols = np.concatenate([np.broadcast_to(np.asarray(d["color"], np.float32), (k, 3))
@@ -88,14 +92,18 @@ class MeshLayer:
             self.line_idx.from_numpy(self.lines)
         self._frame = fast(_build(self))  # (engine.launch)
 
+    @property
+    def host_copy(self) -> bool:
+        """Whether some body's vertices come in through NumPy (``update``)."""
+        return bool(self.host_rows)
+
     def update(self) -> None:
-        """Copy the bodies' node positions in (``draw`` recomputes the vertex normals): nothing
-        to do when every body gives its ``position_field`` (``draw`` copies those), else every
-        body's ``positions`` through NumPy (those fields' rows then copied over with the same
-        values)."""
-        if self.host_copy:
-            pos = np.concatenate([d["positions"]() for d in self.draws]).astype(np.float32)
-            self.mesh_pos.from_numpy(pos)
+        """Copy in the vertices of the bodies that give only ``positions`` (rounded to f32 by
+        NumPy; ``draw`` copies the ``position_field`` ones and recomputes the vertex normals)."""
+        if self.host_rows:
+            for positions, first, count in self.host_rows:
+                self._staged[first:first + count] = positions()
+            self.mesh_pos.from_numpy(self._staged)
 
     def draw(self, t, cam) -> None:
         """Rasterise into the frame targets ``t`` (engine.render.targets.FrameTargets): the
