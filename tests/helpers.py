@@ -73,6 +73,18 @@ def sim_scene(cfg):
     return Scene(load_config(cfg), render=False)
 
 
+def drawn_scene(path: str, frames: int = 20, size=(160, 90), **render):
+    """A shipped config's scene (``path`` relative to the checkout) with its renderer at ``size``
+    and these ``render.*`` overrides, advanced ``frames`` frames."""
+    from engine.config.load import load_config
+    from engine.scene import Scene
+
+    s = Scene(load_config(os.path.join(ROOT, path), {f"render.{k}": v for k, v in render.items()}),
+              width=size[0], height=size[1])
+    run_frames(s, frames)
+    return s
+
+
 def run_frames(scene, frames: int) -> None:
     for _ in range(frames):
         scene.advance_frame()

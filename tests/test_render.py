@@ -1,27 +1,13 @@
 """The renderer: two schedules, one image; determinism; sizes, cameras and overlays without
 recompiling; the reduced-resolution layer; what the output array holds."""
-import os
-
 import numpy as np
 import pytest
 
-from helpers import on_thread_counts
+from helpers import drawn_scene, on_thread_counts
 
 from engine.api import ParticleScene
-from engine.config import load_config
 from engine.render.renderer import MAX_SIZES_KEPT, Renderer
 from engine.render.resolution import particle_scale
-from engine.scene import Scene
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def _scene(path, frames=20, size=(160, 90), **render):
-    cfg = load_config(os.path.join(ROOT, path), {f"render.{k}": v for k, v in render.items()})
-    s = Scene(cfg, width=size[0], height=size[1])
-    for _ in range(frames):
-        s.advance_frame()
-    return s
 
 
 def _other_schedule(s, schedule):
@@ -37,7 +23,7 @@ def test_per_pixel_schedule_draws_the_per_tile_image(path, res):
     """The GPU's schedule (a thread per pixel, registers) and the CPU's (a thread per tile,
     sprite-major) add the same sprites to each pixel in the same order: the same image but for
     compiler rounding (fast math may fuse differently in the two kernels)."""
-    s = _scene(path, size=(192, 108), particle_resolution=res)
+    s = drawn_scene(path, size=(192, 108), particle_resolution=res)
     tiles = s.render()
     pixels = _other_schedule(s, "pixels").render(s.camera, 192, 108)
     diff = np.abs(tiles.astype(int) - pixels.astype(int))
@@ -97,7 +83,7 @@ def test_a_second_scene_compiles_no_composite_kernel():
 
 @pytest.mark.slow  # (default run kept under 5 minutes cold: CI runs it with the slow tests)
 def test_new_sizes_cameras_and_overlays_compile_nothing():
-    s = _scene("configs/sparks.toml", frames=5, size=(128, 72))
+    s = drawn_scene("configs/sparks.toml", frames=5, size=(128, 72))
     r = s.renderer
     s.render()
     s.render(transparent=True)
@@ -119,7 +105,7 @@ def test_new_sizes_cameras_and_overlays_compile_nothing():
 
 @pytest.mark.slow
 def test_background_is_redrawn_when_camera_or_colliders_move():
-    s = _scene("configs/sparks.toml", frames=5)
+    s = drawn_scene("configs/sparks.toml", frames=5)
     first = s.render()
     assert np.array_equal(s.render(), first)  # kept background
     moved = s.camera.__class__((0.3, 1.8, 5.0), s.camera.look_at, s.camera.fov)
@@ -138,7 +124,7 @@ def test_a_moving_collider_redraws_only_where_it_was_and_is():
     """hair: the head (a sphere collider on a path) moves every frame over a ground plane, with a
     soft body drawn into the frame's own copy of the background. The kept background redrawn in
     the moved sphere's screen rectangles gives the bytes a whole redraw gives, frame after frame."""
-    s = _scene("configs/hair.toml", frames=0, size=(160, 90), particle_resolution=0.5)
+    s = drawn_scene("configs/hair.toml", frames=0, size=(160, 90), particle_resolution=0.5)
     R = s.renderer
     rects = []
     draw = R._background
@@ -160,7 +146,7 @@ def test_a_moving_collider_redraws_only_where_it_was_and_is():
 
 @pytest.mark.slow
 def test_pair_list_grows_without_changing_the_image():
-    s = _scene("configs/sparks.toml", frames=15)
+    s = drawn_scene("configs/sparks.toml", frames=15)
     ref = s.render()
     t = s.renderer.targets(s.width, s.height)
     t.grow_pairs(16)
@@ -172,8 +158,8 @@ def test_pair_list_grows_without_changing_the_image():
 def test_reduced_layer_stays_close_to_full_resolution():
     """Smoke drawn into the ¼-resolution layer and upsampled looks like smoke drawn at full
     resolution: small differences, spread thin, no shift in overall brightness."""
-    full = _scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=1)
-    quarter = _scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=0.25)
+    full = drawn_scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=1)
+    quarter = drawn_scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=0.25)
     a = full.render()[..., :3].astype(float)
     b = quarter.render()[..., :3].astype(float)
     assert quarter.renderer.targets(320, 180).has_lo and not full.renderer.targets(320, 180).has_lo
@@ -210,7 +196,7 @@ def test_transparent_overlay_is_premultiplied_with_alpha_zero_where_nothing_is_d
 def test_render_into_a_given_array_and_refuse_a_wrong_one():
     """Every pixel of ``out`` is written, whatever it held (the untouched tiles too: on the CPU
     the frame starts as one copy of the packed background, which the composite then skips)."""
-    s = _scene("configs/sparks.toml", frames=5, size=(96, 54))
+    s = drawn_scene("configs/sparks.toml", frames=5, size=(96, 54))
     out = np.full((54, 96, 4), 0xAB, np.uint8)
     got = s.render(out=out)
     assert got is out and out[..., :3].max() > 0 and np.array_equal(out, s.render(out=np.zeros_like(out)))
@@ -311,7 +297,7 @@ def test_cached_edge_flags_follow_the_camera():
     in it (depths only). Smoke over a ground plane seen from a camera tilting down: the horizon,
     where the upsample is bilateral, moves, and each frame equals one drawn with the flags
     recomputed from nothing (a stale flag would leave the old horizon's tiles bilinear)."""
-    s = _scene("configs/flames.toml", frames=40, size=(320, 180), particle_resolution=0.25)
+    s = drawn_scene("configs/flames.toml", frames=40, size=(320, 180), particle_resolution=0.25)
     t = s.renderer.targets(320, 180)
     cam = s.camera
     seen = []
@@ -353,102 +339,3 @@ def test_cached_edge_flags_follow_a_moving_body():
         assert np.array_equal(_fresh_edges(s, t), img), k
     assert changed > 0  # the jelly made some tile's upsample bilateral on its way (not vacuous)
     s.close()
-
-
-class _NoField:
-    """A body as a host's own drawable would be: its vertices through ``positions`` only."""
-
-    def __init__(self, body):
-        self.body = body
-
-    def drawables(self):
-        d = dict(self.body.drawables())
-        d.pop("position_field")
-        return d
-
-
-@pytest.mark.slow
-def test_the_mesh_pass_reads_a_soft_bodys_nodes_as_positions_gives_them():
-    """A soft body's mesh pass copies the nodes from the body's own field inside its launch (no
-    to_numpy / from_numpy a frame): the image is the one drawn through ``positions``, frame after
-    frame as the cloth falls (checked to fail with the copy left out of the pass: nothing is
-    drawn; every default test that draws a soft body fails so too)."""
-    s = _scene("configs/cloth.toml", frames=0, size=(192, 108))
-    body = s.bodies[0]
-    assert s.renderer.mesh.fields and not s.renderer.mesh.host_copy
-    host = Renderer(None, [], s.colliders, s.cfg.render, bodies=[_NoField(body)])
-    assert host.mesh.host_copy and not host.mesh.fields
-    first = None
-    for k in range(4):
-        for _ in range(8):
-            s.advance_frame()
-        img = s.render(192, 108).copy()
-        assert np.array_equal(img, host.render(s.camera, 192, 108)), k
-        first = img if first is None else first
-    assert not np.array_equal(first, img)  # the body moved (not vacuous)
-
-
-class _Triangles:
-    """A host's own drawable: two triangles facing the camera, their six vertices in a Taichi
-    field of ``rows`` rows, given as ``position_field`` (``with_field``) or through
-    ``positions`` only."""
-
-    def __init__(self, field, with_field=True):
-        self.field, self.with_field = field, with_field
-
-    def drawables(self):
-        d = dict(kind="mesh", positions=lambda: np.resize(self.field.to_numpy(), (6, 3)),
-                 triangles=np.array([[0, 1, 2], [3, 4, 5]], np.int32), lines=np.zeros((0, 2), np.int32),
-                 color=(0.8, 0.4, 0.2))
-        if self.with_field:
-            d["position_field"] = self.field
-        return d
-
-
-def test_the_mesh_pass_draws_a_field_as_its_positions_give_it():
-    """A drawable's ``position_field`` is copied in by the mesh pass itself (no NumPy a frame):
-    the image is the one drawn through ``positions``, and follows the field when it changes
-    (checked to fail with the pass's copy left out: nothing is drawn). A field shorter than the
-    vertices is refused with one line naming it, nothing read past its end."""
-    import taichi as ti
-    from engine.render.camera import Camera
-
-    cfg = load_config(os.path.join(ROOT, "configs/cloth.toml")).render
-    field = ti.Vector.field(3, ti.f32, shape=8)  # (two spare rows past the six vertices)
-    own, host = (Renderer(None, [], None, cfg, bodies=[_Triangles(field, w)]) for w in (True, False))
-    assert own.mesh.fields and not own.mesh.host_copy and host.mesh.host_copy and not host.mesh.fields
-    cam = Camera((0.0, 0.5, 3.0), (0.0, 0.5, 0.0), 45.0)
-    tri = np.array([[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.8, 0.0]], np.float32)
-    images = []
-    for shift in (0.0, 0.4):
-        field.from_numpy(np.concatenate([tri + [shift - 0.6, 0.0, 0.0], tri + [shift, 0.1, 0.2],
-                                         np.zeros((2, 3), np.float32)]).astype(np.float32))
-        images.append(own.render(cam, 96, 54).copy())
-        assert np.array_equal(images[-1], host.render(cam, 96, 54)), shift
-    assert not np.array_equal(images[0], images[1])  # drawn, and moved with the field (not vacuous)
-    with pytest.raises(ValueError, match=r"^drawables: position_field holds \(5,\) rows, fewer than the 6 "):
-        Renderer(None, [], None, cfg, bodies=[_Triangles(ti.Vector.field(3, ti.f32, shape=5))])
-
-
-@pytest.mark.slow
-def test_the_mesh_pass_puts_each_bodys_nodes_at_its_offset():
-    """Two soft bodies of two scenes (a chain, then a cloth) in one renderer: drawn through their
-    fields (the cloth's rows after the chain's), and with the chain given through ``positions``
-    only (the host copies the chain's rows, the pass the cloth's), the images are the ones drawn
-    with both through ``positions``."""
-    a = _scene("configs/chain.toml", frames=0, size=(192, 108))
-    b = _scene("configs/cloth.toml", frames=0, size=(192, 108))
-    chain, cloth = a.bodies[0], b.bodies[0]
-    make = lambda bodies: Renderer(None, [], b.colliders, b.cfg.render, bodies=bodies)  # noqa: E731
-    fields, mixed, host = make([chain, cloth]), make([_NoField(chain), cloth]), make([_NoField(chain), _NoField(cloth)])
-    assert [f[1] for f in fields.mesh.fields] == [0, chain.node_count] and not fields.mesh.host_copy
-    assert [f[1] for f in mixed.mesh.fields] == [chain.node_count] and mixed.mesh.host_copy
-    for k in range(3):
-        for _ in range(8):
-            a.advance_frame()
-            b.advance_frame()
-        ref = host.render(b.camera, 192, 108).copy()
-        assert np.array_equal(fields.render(b.camera, 192, 108), ref), k
-        assert np.array_equal(mixed.render(b.camera, 192, 108), ref), k
-    # the chain is in view: a pass that put the cloth's rows over the chain's would show
-    assert not np.array_equal(make([_NoField(cloth)]).render(b.camera, 192, 108), ref)

@@ -79,8 +79,9 @@ runtime.on_reset(_BUILT.clear)
 def _build(uses_add: bool, uses_alpha: bool):
     # one byte an entry: the 16 KB table stays in L1 (as i32, 64 KB, it did not: the composite of
     # debris.toml at 1280×720, 81 % of its tiles reduced-layer-only, 12.4 → 6.8 ms). The same
-    # entries; LLVM schedules the float work around the narrower loads differently, which moved
-    # one channel of one pixel by 1 in 30 frames of debris and of water at 640×360 (others: none)
+    # entries; one channel of one pixel moved by 1 in 30 frames of debris and of water at 640×360
+    # (others: none), presumably LLVM compiling the index's float work differently around the
+    # narrower loads (not confirmed)
     lut = ti.field(ti.u8, shape=LUT_SIZE)
     lut.from_numpy(tonemap_table().astype(np.uint8))
 
