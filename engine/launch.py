@@ -1,4 +1,4 @@
-"""A hot kernel launched without Taichi's per-call Python (the CPU backend).
+"""A hot kernel launched without Taichi's per-call Python (the CPU and CUDA backends).
 
 Taichi 1.7 spends ~15 µs of Python per ndarray argument and ~6 µs per scalar at every call: it
 derives the template key from every argument (``TaichiCallableTemplateMapper.extract``), then sets
@@ -9,10 +9,13 @@ arguments each, several times a frame: a 28-argument kernel cost ~300 µs a call
 :class:`FastKernel` calls the kernel the usual way once — which checks the arguments, compiles,
 and binds the compiled instance — and afterwards sets the arguments straight into a launch
 context by their annotated kind, then launches the same compiled code (same bytes). It takes
-kernels whose arguments are ndarrays, scalars, float vectors and ``ti.template()`` objects, and
-only on the CPU backend (a GPU's numpy arguments need the copies the usual path makes). A
-numpy argument's dtype and rank are part of the binding: a call with different ones goes the
-usual way (which checks them) and binds again.
+kernels whose arguments are ndarrays, scalars, float vectors and ``ti.template()`` objects, on
+the CPU and CUDA backends (Taichi's LLVM backends). On CUDA a numpy argument is a host pointer
+either way: Taichi's C++ launcher copies it to the device before the launch and back after it,
+for the usual call and this one alike (Taichi 1.7's Python path adds nothing for a contiguous
+numpy array). Vulkan and Metal keep the usual path (not measured here). A numpy argument's
+dtype and rank are part of the binding: a call with different ones goes the usual way (which
+checks them) and binds again.
 
 Template arguments are compiled in, not passed: a binding holds for the very objects it was made
 with. It keeps each as a weak reference, as Taichi's own template key does (a strong one would
@@ -33,6 +36,7 @@ import numpy as np
 
 _ND, _INT, _UINT, _FLOAT, _VEC, _TPL = range(6)
 MAX_BINDINGS = 16
+BINDING_ARCHES = ("cpu", "cuda")  # where a kernel binds (engine.runtime._arch_in_use names)
 _PLAIN = (int, float, bool, str)
 
 
@@ -177,7 +181,7 @@ class FastKernel:
 
         out = self._usual(*args)
         self._bound.pop(key, None)
-        if _arch_in_use() == "cpu" and not self._prim.has_print:  # (a print needs the usual sync)
+        if _arch_in_use() in BINDING_ARCHES and not self._prim.has_print:  # (a print needs the usual sync)
             if len(self._bound) >= MAX_BINDINGS:
                 self._bound.clear()
             cpp = self._prim.compiled_kernels[self._prim.ensure_compiled(*args)]

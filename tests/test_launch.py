@@ -220,3 +220,23 @@ def test_a_lean_kernel_compiles_without_the_cse_pass_and_leaves_the_setting_as_i
     with pytest.raises(Exception):
         lean(np.empty(5, np.float64), 1.0)  # another dtype: refused by the usual path, in the switch
     assert impl.current_cfg().opt_level == before
+
+
+@pytest.mark.parametrize("arch, binds", [("cpu", True), ("cuda", True), ("vulkan", False), ("metal", False)])
+def test_kernels_bind_on_the_llvm_backends_only(monkeypatch, arch, binds):
+    """CPU and CUDA launch bound kernels (on CUDA Taichi's C++ launcher makes a numpy argument's
+    host-device copies for either path); Vulkan and Metal keep the usual call. The results are
+    the usual call's either way (the arch is pretended here: the kernel runs on this CPU)."""
+    from engine import runtime
+
+    monkeypatch.setattr(runtime, "_arch_in_use", lambda: arch)
+    fk = FastKernel(_mix)
+    a = ti.ndarray(ti.i32, 5)
+    a.from_numpy(np.arange(5, dtype=np.int32))
+    v = ti.ndarray(ti.types.vector(2, ti.f32), 5)
+    v.fill(1.5)
+    for k in (2, 3):
+        want, got = np.empty(5, np.uint32), np.empty(5, np.uint32)
+        assert _mix(a, v, want, k, 1, 2.0) == fk(a, v, got, k, 1, 2.0)
+        assert np.array_equal(got, want)
+    assert bool(fk._bound) is binds
