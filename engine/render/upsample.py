@@ -146,25 +146,47 @@ def lo_near(px0, py0, px1, py1, touched_lo: ti.template(), Wl, Hl, TXl, s):
     return near
 
 
+@ti.func
+def _row_needed(j, touched_lo: ti.template(), TXl, TYl, R):
+    """Whether reduced row j lies within R rows of a reduced tile drawn this frame."""
+    need = 0
+    for tr in range(ti.max(0, j - R) // TILE, ti.min(TYl - 1, (j + R) // TILE) + 1):
+        for tx in range(TXl):
+            need |= touched_lo[tr * TXl + tx]
+    return need
+
+
+@ti.func
+def _row_texel(lo: ti.template(), j, x, LO, Wl, s):
+    """Reduced row j interpolated along x at full-resolution column x (bilinear's x half)."""
+    u = (x + 0.5) * s - 0.5
+    i0 = ti.cast(ti.floor(u), ti.i32)
+    fx = u - i0
+    xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
+    return (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
+
+
 @ti.kernel
 def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32,
-            touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32):
+            touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32, per_pixel: ti.template()):
     """The reduced layer's rows interpolated along x at every full-resolution column:
     rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
     vertical half with two loads per pixel instead of four) — only the rows the composite
     can read: it reads row j for a tile whose footprint (rows ``lo_near`` spans, fewer than
     R = TILE·s + 3) holds a reduced tile drawn this frame, so row j is needed only when a
-    drawn reduced tile lies within R rows of it (the rest are left as they were, unread)."""
+    drawn reduced tile lies within R rows of it (the rest are left as they were, unread).
+
+    ``per_pixel`` (the GPU's schedule): one thread a texel, each testing its row (a few dozen
+    cached loads), since a thread a row leaves a GPU with ~Hl threads (180 at 1280×720: 1.75 ms
+    on an H200, one launch of debris). Else one thread a row, its columns in order (the CPU's).
+    Both write the same values."""
     LO = W * H
-    for j in range(Hl):
-        need = 0
-        for tr in range(ti.max(0, j - R) // TILE, ti.min(TYl - 1, (j + R) // TILE) + 1):
-            for tx in range(TXl):
-                need |= touched_lo[tr * TXl + tx]
-        if need != 0:
-            for x in range(W):
-                u = (x + 0.5) * s - 0.5
-                i0 = ti.cast(ti.floor(u), ti.i32)
-                fx = u - i0
-                xa, xb = ti.min(ti.max(i0, 0), Wl - 1), ti.min(ti.max(i0 + 1, 0), Wl - 1)
-                rows[j * W + x] = (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
+    if ti.static(per_pixel):
+        for j, x in ti.ndrange(Hl, W):
+            if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
+                rows[j * W + x] = _row_texel(lo, j, x, LO, Wl, s)
+    else:
+        for j in range(Hl):
+            if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
+                for x in range(W):
+                    rows[j * W + x] = _row_texel(lo, j, x, LO, Wl, s)
