@@ -34,30 +34,32 @@ def test_per_pixel_schedule_draws_the_per_tile_image(path, res):
 
 
 @pytest.mark.parametrize("per_pixel", [False, True])
-def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_pixel):
-    """``lo_rows``, both loop shapes (a thread a row: the CPU's; a thread a texel: the GPU's):
-    a needed row holds the reduced layer interpolated along x (a NumPy reference), a row no
-    drawn reduced tile reaches keeps what it held."""
+@pytest.mark.parametrize("k", [2, 4])
+def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_pixel, k):
+    """``lo_rows``, both loop shapes (a thread a row walking texel pairs: the CPU's; a thread a
+    texel: the GPU's), at both reduced scales (1/k): a needed row holds the reduced layer
+    interpolated along x (a NumPy reference), a row no drawn reduced tile reaches keeps what
+    it held."""
     import taichi as ti
 
     from engine.render.sprites import TILE
     from engine.render.upsample import lo_rows
 
-    W, H, s = 256, 256, 0.25
+    W, H, s = 256, 256, 1.0 / k
     Wl, Hl = int(W * s), int(H * s)
     TXl, TYl = -(-Wl // TILE), -(-Hl // TILE)
     R = int(TILE * s) + 3
     rng = np.random.default_rng(5)
     lo_np = rng.random((W * H + Wl * Hl, 4), dtype=np.float32)
     touched_np = np.zeros(TXl * TYl, np.int32)
-    touched_np[1 * TXl + 2] = 1  # one drawn reduced tile: rows 16..31
+    touched_np[1 * TXl + 1] = 1  # one drawn reduced tile: rows 16..31
     lo = ti.ndarray(ti.types.vector(4, ti.f32), lo_np.shape[0])
     lo.from_numpy(lo_np)
     touched = ti.ndarray(ti.i32, touched_np.shape[0])
     touched.from_numpy(touched_np)
     rows = ti.ndarray(ti.types.vector(4, ti.f32), Hl * W)
     rows.fill(-7.0)
-    lo_rows(lo, rows, W, H, Wl, Hl, s, touched, TXl, TYl, R, per_pixel)
+    lo_rows(lo, rows, W, H, Wl, Hl, s, touched, TXl, TYl, R, per_pixel, k)
     got = rows.to_numpy().reshape(Hl, W, 4)
     u = (np.arange(W) + 0.5) * s - 0.5
     i0 = np.floor(u).astype(int)
@@ -68,7 +70,8 @@ def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_p
     for j in range(Hl):
         needed[j] = any(touched_np[tr * TXl:(tr + 1) * TXl].any()
                         for tr in range(max(0, j - R) // TILE, min(TYl - 1, (j + R) // TILE) + 1))
-    assert needed.sum() == 30 and needed[9:39].all()  # rows 16 - R .. 31 + R
+    lo_row, hi_row = 16 - R, 31 + R
+    assert needed.sum() == hi_row - lo_row + 1 and needed[lo_row:hi_row + 1].all()
     np.testing.assert_allclose(got[needed], want[needed], rtol=1e-6, atol=1e-6)
     assert (got[~needed] == -7.0).all()
 

@@ -192,7 +192,7 @@ class Renderer:
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:
             self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
-                               int(TILE * t.scale) + 3, self.schedule == "pixels")
+                               int(TILE * t.scale) + 3, self.schedule == "pixels", round(1 / t.scale))
         if self.schedule == "tiles":
             # the tiles whose cached edge flag the redrawn background makes stale (one of margin)
             ex0, ey0, ex1, ey1 = 1, 1, 0, 0

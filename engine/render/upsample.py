@@ -168,7 +168,8 @@ def _row_texel(lo: ti.template(), j, x, LO, Wl, s):
 
 @ti.kernel
 def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32,
-            touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32, per_pixel: ti.template()):
+            touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32, per_pixel: ti.template(),
+            k: ti.template()):
     """The reduced layer's rows interpolated along x at every full-resolution column:
     rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
     vertical half with two loads per pixel instead of four) — only the rows the composite
@@ -178,15 +179,25 @@ def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32
 
     ``per_pixel`` (the GPU's schedule): one thread a texel, each testing its row (a few dozen
     cached loads), since a thread a row leaves a GPU with ~Hl threads (180 at 1280×720: 1.75 ms
-    on an H200, one launch of debris). Else one thread a row, its columns in order (the CPU's).
-    Both write the same values."""
+    on an H200, one launch of debris). Else one thread a row (the CPU's), walking the row's
+    texels: ``k`` = 1/s (2 or 4) columns a texel pair. Both write the same values."""
     LO = W * H
     if ti.static(per_pixel):
         for j, x in ti.ndrange(Hl, W):
             if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
                 rows[j * W + x] = _row_texel(lo, j, x, LO, Wl, s)
     else:
+        # s = 1/k: column x = k·i + k/2 + m (m < k) lies between texels i and i + 1 at
+        # fx = (m + ½)/k, the value _row_texel computes there (exact in f32 for k = 2, 4):
+        # two loads serve k columns, with no per-column index arithmetic (k odd: other fx)
+        ti.static_assert(k % 2 == 0, "lo_rows: the reduced layer's scale must be 1/2 or 1/4")
         for j in range(Hl):
             if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
-                for x in range(W):
-                    rows[j * W + x] = _row_texel(lo, j, x, LO, Wl, s)
+                for i in range(-1, (W + k) // k):
+                    a = lo[LO + j * Wl + ti.min(ti.max(i, 0), Wl - 1)]
+                    b = lo[LO + j * Wl + ti.min(ti.max(i + 1, 0), Wl - 1)]
+                    for m in ti.static(range(k)):
+                        x = k * i + k // 2 + m
+                        if 0 <= x < W:
+                            fx = ti.static((m + 0.5) / k)
+                            rows[j * W + x] = (1.0 - fx) * a + fx * b
