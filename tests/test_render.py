@@ -11,14 +11,18 @@ from engine.render.resolution import particle_scale
 
 
 def _other_schedule(s, schedule):
+    """A second renderer of scene ``s``, built as the scene builds its own (soft and rigid
+    bodies both drawn), with this schedule."""
     p = s.particles
+    meshes = s.bodies + ([s.rigid] if s.rigid is not None else [])
     return Renderer(p.state if p else None, s.cfg.emitters, s.colliders, s.cfg.render,
-                    bodies=s.bodies, schedule=schedule)
+                    bodies=meshes, rows=p.emitters.count if p else 0, schedule=schedule)
 
 
 @pytest.mark.parametrize("path, res", [("configs/sparks.toml", 1),
                                        pytest.param("configs/dust.toml", 0.5, marks=pytest.mark.slow),
-                                       pytest.param("configs/campfire.toml", 0.25, marks=pytest.mark.slow)])
+                                       pytest.param("configs/campfire.toml", 0.25, marks=pytest.mark.slow),
+                                       pytest.param("configs/debris.toml", 0.25, marks=pytest.mark.slow)])
 def test_per_pixel_schedule_draws_the_per_tile_image(path, res):
     """The GPU's schedule (a thread per pixel, registers) and the CPU's (a thread per tile,
     sprite-major) add the same sprites to each pixel in the same order: the same image but for
@@ -39,7 +43,9 @@ def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_p
     """``lo_rows``, both loop shapes (a thread a row walking texel pairs: the CPU's; a thread a
     texel: the GPU's), at both reduced scales (1/k): a needed row holds the reduced layer
     interpolated along x (a NumPy reference), a row no drawn reduced tile reaches keeps what
-    it held."""
+    it held. The CPU's also marks each needed row's tile columns whose values are all the empty
+    layer (0, 0, 0, 1), exactly those (texel runs set empty in the middle and at the right edge,
+    where the last tile column is cut short)."""
     import taichi as ti
 
     from engine.render.sprites import TILE
@@ -52,6 +58,9 @@ def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_p
     R = int(TILE * s) + 3
     rng = np.random.default_rng(5)
     lo_np = rng.random((W * H + Wl * Hl, 4), dtype=np.float32)
+    layer = lo_np[W * H:].reshape(Hl, Wl, 4)  # (a view)
+    layer[:, 20:40] = layer[:, Wl - 10:] = (0.0, 0.0, 0.0, 1.0)
+    layer[17, 30] = (0.0, 0.0, 0.0, 0.999)  # not empty: its tile columns in row 17 are not
     touched_np = np.zeros(TXl * TYl, np.int32)
     touched_np[1 * TXl + 1] = 1  # one drawn reduced tile: reduced rows 16..31
     lo = ti.ndarray(ti.types.vector(4, ti.f32), lo_np.shape[0])
@@ -60,17 +69,27 @@ def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_p
     touched.from_numpy(touched_np)
     rows = ti.ndarray(ti.types.vector(4, ti.f32), Hl * W)
     rows.fill(-7.0)
-    lo_rows(lo, rows, W, H, Wl, Hl, s, touched, TXl, TYl, R, per_pixel, k)
+    TX = tiles_for(W, H)[0]
+    row_empty = ti.ndarray(ti.i32, Hl * TX)
+    row_empty.fill(-1)
+    lo_rows(lo, rows, row_empty, W, H, Wl, Hl, s, touched, TXl, TYl, R, per_pixel, k)
     got = rows.to_numpy().reshape(Hl, W, 4)
     u = (np.arange(W) + 0.5) * s - 0.5
     i0 = np.floor(u).astype(int)
     fx = (u - i0)[:, None]
-    layer = lo_np[W * H:].reshape(Hl, Wl, 4)
     want = (1 - fx) * layer[:, np.clip(i0, 0, Wl - 1)] + fx * layer[:, np.clip(i0 + 1, 0, Wl - 1)]
     needed = np.zeros(Hl, bool)
     needed[16 - R:31 + R + 1] = True  # the rows within R of the drawn tile's
     np.testing.assert_allclose(got[needed], want[needed], rtol=1e-6, atol=1e-6)
     assert (got[~needed] == -7.0).all()
+    if not per_pixel:
+        flags = row_empty.to_numpy().reshape(Hl, TX)
+        empty = np.pad((want == (0.0, 0.0, 0.0, 1.0)).all(-1), ((0, 0), (0, TX * TILE - W)),
+                       constant_values=True).reshape(Hl, TX, TILE).all(-1)
+        assert empty[needed][:, -1].all() and empty[needed][:, :-1].any(axis=1).sum() >= needed.sum() - 1
+        assert not empty[17].all() and empty[16].sum() > empty[17].sum()
+        np.testing.assert_array_equal(flags[needed], empty[needed])
+        assert (flags[~needed] == -1).all()
 
 
 _PROBE = """
@@ -379,3 +398,55 @@ def test_cached_edge_flags_follow_a_moving_body():
         assert np.array_equal(_fresh_edges(s, t), img), k
     assert changed > 0  # the jelly made some tile's upsample bilateral on its way (not vacuous)
     s.close()
+
+
+def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_drew():
+    """``composite_tiles`` shows a tile row whose two reduced rows are marked empty
+    (``lo_rows``' ``row_empty``) as the packed background — except in a tile a soft or rigid body
+    drew in (``dirty``), whose background is the frame's own (bodies drawn in), not the packed
+    one: there it composites as if unmarked. A 32 × 32 image (2 × 2 tiles) at s = 1/4, the
+    reduced layer empty, one reduced tile drawn (every tile is near it), no sprite at full
+    resolution; the packed background made from other colours than the frame's, so each copy
+    shows."""
+    import taichi as ti
+
+    from engine.render.composite import build_composite_kernels
+
+    k = build_composite_kernels(False, True)
+    W = H = 32
+    s, TX, TY = 0.25, 2, 2
+    Wl = Hl = 8
+    px, LO = W * H, W * H
+    v4 = ti.types.vector(4, ti.f32)
+    rng = np.random.default_rng(3)
+
+    def nd(dtype, a):
+        arr = ti.ndarray(dtype, a.shape[0])
+        arr.from_numpy(a)
+        return arr
+
+    frame_bg = rng.random((px, 4), dtype=np.float32)
+    frame_bg[:, 3] = 0.0
+    other_bg = frame_bg[::-1].copy()  # what the packed background was drawn from
+    packed = np.zeros(px // 2, np.uint64)
+    k["pack_background"](nd(v4, other_bg), packed, W, H, 0, 0, W, H, 1.0, 0)
+    acc = nd(v4, np.tile(np.float32([0, 0, 0, 1]), (LO + Wl * Hl + 16, 1)))
+    rows = nd(v4, np.tile(np.float32([0, 0, 0, 1]), (Hl * W, 1)))
+    dirty = np.int32([1, 0, 0, 0])  # a body drew in tile 0
+
+    def composite(row_empty_value):
+        out = np.zeros(px, np.uint32)
+        edges = nd(ti.i32, np.full(TX * TY, -1, np.int32))
+        k["composite_tiles"](np.zeros(TX * TY, np.int32), acc, acc, rows,
+                             np.full(Hl * TX, row_empty_value, np.int32), nd(v4, frame_bg),
+                             nd(ti.f32, np.ones(LO + Wl * Hl, np.float32)), packed, out,
+                             np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,
+                             1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s, 1, 1.0, 0.9, 0)
+        return out.reshape(H, W)
+
+    marked, computed = composite(1), composite(0)
+    body = np.zeros((H, W), bool)
+    body[:16, :16] = True  # tile 0
+    np.testing.assert_array_equal(marked[body], computed[body])
+    np.testing.assert_array_equal(marked[~body], packed.view(np.uint32).reshape(H, W)[~body])
+    assert (computed[~body] != marked[~body]).mean() > 0.9  # (the copy is seen)

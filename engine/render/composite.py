@@ -156,8 +156,26 @@ def _build(uses_add: bool, uses_alpha: bool):
         bytes in pixel order on a little-endian machine)."""
         return ti.cast((bg_packed[k >> 1] >> ti.cast(32 * (k & 1), ti.u64)) & ti.u64(0xFFFFFFFF), ti.u32)
 
+    @ti.func
+    def background_row(bg_packed: ti.template(), out: ti.template(), out64: ti.template(), copy, y, px0,
+                       px1, W):
+        """Pixels [px0, px1] of row y as the packed background (``copy``: see composite_tiles)."""
+        if copy == 2:
+            pass
+        elif copy == 1 and px1 - px0 == TILE - 1:
+            # two pixels an element: Taichi's CPU code pays per ndarray element, not per byte (a
+            # tile-ordered copy at 1280×720, one thread: u32 3.4–3.9 ms, u64 1.0–1.1 ms in a
+            # micro-benchmark; the empty frame's composite ~1 ms less)
+            k0 = (y * W + px0) >> 1
+            for i in range(k0, k0 + TILE // 2):
+                out64[i] = bg_packed[i]
+        else:
+            for k in range(y * W + px0, y * W + px1 + 1):
+                out[k] = bg_pixel(bg_packed, k)
+
     @ti.kernel
-    def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, bgc: ND_V4, dep: ND_F,
+    def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, row_empty: ND_I1,
+                        bgc: ND_V4, dep: ND_F,
                         bg_packed: ND_U64, out: ND_U32, out64: ND_U64, copy: ti.i32, dirty: ND_I1,
                         dirty_prev: ND_I1,
                         touched_lo: ND_I1, edges: ND_I1, ex0: ti.i32, ey0: ti.i32, ex1: ti.i32,
@@ -173,7 +191,11 @@ def _build(uses_add: bool, uses_alpha: bool):
         depths alone, which change only where the background was redrawn — the tiles
         [ex0, ex1] × [ey0, ey1] (empty when ex0 > ex1), given with one tile of margin, since a
         tile's upsample reads texels up to 2 / s pixels past its edge — or where soft bodies
-        drew this frame or the last (``dirty``, ``dirty_prev``: a tile next to such a tile too)."""
+        drew this frame or the last (``dirty``, ``dirty_prev``: a tile next to such a tile too).
+
+        ``row_empty`` (Hl·TX,): per reduced row and tile column, whether the reduced layer is
+        empty there (``upsample.lo_rows``); a tile row under only the reduced layer whose two rows
+        are both empty shows the packed background."""
         ti.loop_config(block_dim=1)
         for t in range(TX * TY):
             tx, ty = t % TX, t // TX
@@ -190,20 +212,9 @@ def _build(uses_add: bool, uses_alpha: bool):
             if has_lo != 0:
                 near = lo_near(px0, py0, px1, py1, touched_lo, Wl, Hl, TXl, s)
             if n == 0 and near == 0 and dirty[t] == 0:
-                if copy == 2:
-                    pass
-                elif copy == 1 and px1 - px0 == TILE - 1:
-                    # two pixels an element: Taichi's CPU code pays per ndarray element, not per
-                    # byte (a tile-ordered copy at 1280×720, one thread: u32 3.4–3.9 ms, u64
-                    # 1.0–1.1 ms in a micro-benchmark; the empty frame's composite ~1 ms less)
+                if copy != 2:
                     for y in range(py0, py1 + 1):
-                        k0 = (y * W + px0) >> 1
-                        for i in range(k0, k0 + TILE // 2):
-                            out64[i] = bg_packed[i]
-                else:
-                    for y in range(py0, py1 + 1):
-                        for k in range(y * W + px0, y * W + px1 + 1):
-                            out[k] = bg_pixel(bg_packed, k)
+                        background_row(bg_packed, out, out64, copy, y, px0, px1, W)
             else:
                 edge = 0
                 if near != 0:
@@ -218,9 +229,15 @@ def _build(uses_add: bool, uses_alpha: bool):
                         v = (y + 0.5) * s - 0.5
                         j0 = ti.cast(ti.floor(v), ti.i32)
                         fy = v - j0
-                        ra = ti.min(ti.max(j0, 0), Hl - 1) * W
-                        rb = ti.min(ti.max(j0 + 1, 0), Hl - 1) * W
-                        if px1 - px0 == TILE - 1 and mode == 0:
+                        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+                        ra, rb = ja * W, jb * W
+                        if (dirty[t] == 0 and row_empty[ja * TX + tx] != 0
+                                and row_empty[jb * TX + tx] != 0):
+                            # both rows are the empty layer here (``row_empty``: upsample.lo_rows)
+                            # and no body drew in the tile (``bgc`` is then the frame's, bodies
+                            # drawn in, not what was packed): the packed background, bit for bit
+                            background_row(bg_packed, out, out64, copy, y, px0, px1, W)
+                        elif px1 - px0 == TILE - 1 and mode == 0:
                             # a whole row of the tile, opaque RGBA (the usual mode) with the mode a
                             # constant: its tests and swaps folded away (a branch per pixel cost
                             # the unrolled row ~1 ms a frame at 1280×720; a second unrolled copy

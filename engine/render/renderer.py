@@ -191,7 +191,7 @@ class Renderer:
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
         if has_lo:
-            self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
+            self._k["lo_rows"](t.accA, t.lo_rows, t.lo_row_empty, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
                                int(TILE * t.scale) + 3, self.schedule == "pixels", round(1 / t.scale))
         if self.schedule == "tiles":
             # the tiles whose cached edge flag the redrawn background makes stale (one of margin)
@@ -199,7 +199,7 @@ class Renderer:
             if rect is not None:
                 ex0, ey0 = rect[0] // TILE - 1, rect[1] // TILE - 1
                 ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
-            self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, bgc, dep, t.bg_packed,
+            self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, t.lo_row_empty, bgc, dep, t.bg_packed,
                                        packed, *untouched_tiles(t, image, packed), t.dirty, t.dirty_prev if t.mesh else t.dirty,
                                        t.touched_lo, t.edges, ex0, ey0, ex1, ey1, *common)
         else:

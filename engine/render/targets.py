@@ -71,6 +71,8 @@ class FrameTargets:
         self.accA.fill(ti.Vector([0.0, 0.0, 0.0, 1.0]))  # the empty layer (see composite.splat_tiles)
         self.accB = ti.ndarray(vec4, shape=both if alpha else 1)
         self.lo_rows = ti.ndarray(vec4, shape=self.Hl * W if self.has_lo else 1)
+        # per reduced row and full-resolution tile column: the row is the empty layer there
+        self.lo_row_empty = ti.ndarray(ti.i32, shape=self.Hl * self.TX if self.has_lo else 1)
         self.touched_lo = ti.ndarray(ti.i32, shape=max(1, self.T1))
         self.touched_lo.fill(0)
         self.touched_co = ti.ndarray(ti.i32, shape=max(1, self.T2))

@@ -166,9 +166,15 @@ def _row_texel(lo: ti.template(), j, x, LO, Wl, s):
     return (1.0 - fx) * lo[LO + j * Wl + xa] + fx * lo[LO + j * Wl + xb]
 
 
+@ti.func
+def _is_empty(v):
+    """Whether a reduced texel is the empty layer (0, 0, 0, 1) exactly."""
+    return v[0] == 0.0 and v[1] == 0.0 and v[2] == 0.0 and v[3] == 1.0
+
+
 @ti.kernel
-def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32,
-            touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32, per_pixel: ti.template(),
+def lo_rows(lo: ND_V4, rows: ND_V4, row_empty: ND_I1, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32,
+            s: ti.f32, touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32, per_pixel: ti.template(),
             k: ti.template()):
     """The reduced layer's rows interpolated along x at every full-resolution column:
     rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
@@ -180,7 +186,16 @@ def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32
     ``per_pixel`` (the GPU's schedule): one thread a texel, each testing its row (a few dozen
     cached loads), since a thread a row leaves a GPU with ~Hl threads (180 at 1280×720: 1.75 ms
     on an H200, one launch of debris). Else one thread a row (the CPU's), walking the row's
-    texels: ``k`` = 1/s (2 or 4) columns a texel pair. Both write the same values."""
+    texels: ``k`` = 1/s (2 or 4) columns a texel pair. Both write the same values.
+
+    The CPU's also marks, per needed row j and full-resolution tile column tx,
+    ``row_empty[j·TX + tx]`` (TX = ceil(W / TILE)): whether every texel pair the row's values
+    there are drawn from is the empty layer (0, 0, 0, 1) exactly. Then so is each of those values,
+    and each vertical lerp of two such rows (the weights are multiples of 1/8 at s = 1/2 or 1/4,
+    so (1 − f) + f = 1 exactly), and the composite's pixel there is the packed background's bit
+    for bit (c·1 + 0): ``composite_tiles`` copies it (40–50 % of the rows of the tiles under smoke
+    that hold no sprite of their own, in explosion, debris and campfire at 1280×720). The GPU's
+    composite does not read it."""
     LO = W * H
     if ti.static(per_pixel):
         for j, x in ti.ndrange(Hl, W):
@@ -191,13 +206,21 @@ def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32
         # fx = (m + ½)/k, the value _row_texel computes there (exact in f32 for k = 2, 4):
         # two loads serve k columns, with no per-column index arithmetic (k odd: other fx)
         ti.static_assert(k % 2 == 0, "lo_rows: the reduced layer's scale must be 1/2 or 1/4")
+        ti.static_assert(TILE & (TILE - 1) == 0)
+        TX = (W + TILE - 1) // TILE
         for j in range(Hl):
             if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
+                run = 1  # every pair so far in this tile column empty
                 for i in range(-1, (W + k) // k):
                     a = lo[LO + j * Wl + ti.min(ti.max(i, 0), Wl - 1)]
                     b = lo[LO + j * Wl + ti.min(ti.max(i + 1, 0), Wl - 1)]
+                    both = ti.select(_is_empty(a) and _is_empty(b), 1, 0)
                     for m in ti.static(range(k)):
                         x = k * i + k // 2 + m
                         if 0 <= x < W:
                             fx = ti.static((m + 0.5) / k)
                             rows[j * W + x] = (1.0 - fx) * a + fx * b
+                            run &= both
+                            if x & (TILE - 1) == TILE - 1 or x == W - 1:  # a tile column's last
+                                row_empty[j * TX + x // TILE] = run
+                                run = 1
