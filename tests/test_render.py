@@ -441,7 +441,7 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
                              np.full(Hl * TX, row_empty_value, np.int32), nd(v4, frame_bg),
                              nd(ti.f32, np.ones(LO + Wl * Hl, np.float32)), packed, out,
                              np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,
-                             1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s, 1, 1.0, 0.9, 0)
+                             np.zeros(TX * TY * 16, np.int32), 1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s, 1, 1.0, 0.9, 0)
         return out.reshape(H, W)
 
     marked, computed = composite(1), composite(0)

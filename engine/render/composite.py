@@ -38,7 +38,7 @@ from .. import runtime
 from ..launch import fast
 from .splat_kernels import EMPTY_LAYER, ND_PAIRS, build_splat
 from .sprites import TILE
-from .upsample import ND_F, ND_I1, ND_V4, lo_edge, lo_near, lo_rows, lo_sample, tile_is_edge
+from .upsample import ND_F, ND_I1, ND_V4, lo_edge, lo_near, lo_rows, lo_sample, tile_edge_rows
 
 LUT_SIZE = 16384
 LUT_MAX = 8.0
@@ -178,8 +178,8 @@ def _build(uses_add: bool, uses_alpha: bool):
                         bgc: ND_V4, dep: ND_F,
                         bg_packed: ND_U64, out: ND_U32, out64: ND_U64, copy: ti.i32, dirty: ND_I1,
                         dirty_prev: ND_I1,
-                        touched_lo: ND_I1, edges: ND_I1, ex0: ti.i32, ey0: ti.i32, ex1: ti.i32,
-                        ey1: ti.i32, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
+                        touched_lo: ND_I1, edges: ND_I1, edge_rows: ND_I1, ex0: ti.i32, ey0: ti.i32,
+                        ex1: ti.i32, ey1: ti.i32, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
                         Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
                         shading: ti.f32, mode: ti.i32):
         """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
@@ -187,11 +187,12 @@ def _build(uses_add: bool, uses_alpha: bool):
         (``copy`` 0: pixel by pixel; 1: two pixels an element, through ``out64``; 2: not at all,
         the caller has filled ``out`` with it in one memcpy: ``targets.untouched_tiles``).
 
-        ``edges`` (TX·TY,) caches ``tile_is_edge`` per tile (−1: not known), for it depends on the
-        depths alone, which change only where the background was redrawn — the tiles
-        [ex0, ex1] × [ey0, ey1] (empty when ex0 > ex1), given with one tile of margin, since a
-        tile's upsample reads texels up to 2 / s pixels past its edge — or where soft bodies
-        drew this frame or the last (``dirty``, ``dirty_prev``: a tile next to such a tile too).
+        ``edges`` (TX·TY,) caches per tile whether its upsample is bilateral at any pixel (−1: not
+        known) and ``edge_rows`` (TX·TY·TILE,) at which (``tile_edge_rows``: a mask per pixel row,
+        valid where ``edges`` is not −1), for they depend on the depths alone, which change only
+        where the background was redrawn — the tiles [ex0, ex1] × [ey0, ey1] (empty when
+        ex0 > ex1), given with one tile of margin, since a tile's upsample reads texels up to
+        2 / s pixels past its edge — or where soft bodies drew this frame or the last (``dirty``, ``dirty_prev``: a tile next to such a tile too).
 
         ``row_empty`` (Hl·TX,): per reduced row and tile column, whether the reduced layer is
         empty there (``upsample.lo_rows``); a tile row under only the reduced layer whose two rows
@@ -220,17 +221,23 @@ def _build(uses_add: bool, uses_alpha: bool):
                 if near != 0:
                     edge = edges[t]
                     if edge < 0:
-                        edge = tile_is_edge(px0, py0, px1, py1, dep, W * H, W, Wl, Hl, s)
+                        edge = tile_edge_rows(px0, py0, px1, py1, dep, W * H, W, Wl, Hl, s, edge_rows,
+                                              t * TILE)
                         edges[t] = edge
-                if n == 0 and edge == 0 and near != 0:
-                    # the common case under smoke: the reduced layer alone, bilinear; the row
-                    # terms hoisted by hand (two loads and a lerp per pixel)
-                    for y in range(py0, py1 + 1):
-                        v = (y + 0.5) * s - 0.5
-                        j0 = ti.cast(ti.floor(v), ti.i32)
-                        fy = v - j0
-                        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
-                        ra, rb = ja * W, jb * W
+                ab, aw = tile_rows(px0, py0, px1, py1, W)
+                for y in range(py0, py1 + 1):
+                    # the upsample's row terms, hoisted by hand (two loads and a lerp per pixel
+                    # where it is bilinear: every pixel whose bit in the row's mask is clear)
+                    v = (y + 0.5) * s - 0.5
+                    j0 = ti.cast(ti.floor(v), ti.i32)
+                    fy = v - j0
+                    ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+                    ra, rb = ja * W, jb * W
+                    mask = 0
+                    if edge != 0:
+                        mask = edge_rows[t * TILE + y - py0]
+                    if n == 0 and near != 0 and mask == 0:
+                        # the common case under smoke: the reduced layer alone, bilinear
                         if (dirty[t] == 0 and row_empty[ja * TX + tx] != 0
                                 and row_empty[jb * TX + tx] != 0):
                             # both rows are the empty layer here (``row_empty``: upsample.lo_rows)
@@ -248,9 +255,7 @@ def _build(uses_add: bool, uses_alpha: bool):
                                 low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
                                 out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
                                                         mode)
-                else:
-                    ab, aw = tile_rows(px0, py0, px1, py1, W)
-                    for y in range(py0, py1 + 1):
+                    else:
                         for x in range(px0, px1 + 1):
                             k = y * W + x
                             full = EMPTY_LAYER
@@ -258,8 +263,11 @@ def _build(uses_add: bool, uses_alpha: bool):
                                 full = acc_layer(accA, accB, ab + y * aw + x, shading)
                             low = EMPTY_LAYER
                             if near != 0:
-                                low = lo_sample(x, y, dep[k], accA, rows, dep, W * H, W, Wl, Hl, s,
-                                                edge)
+                                if (mask >> (x - px0)) & 1 != 0:
+                                    low = lo_sample(x, y, dep[k], accA, rows, dep, W * H, W, Wl, Hl,
+                                                    s, 1)
+                                else:
+                                    low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
                             out[k] = finish(bgc[k], low, full, exposure, mode)
 
     @ti.kernel

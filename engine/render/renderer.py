@@ -201,7 +201,7 @@ class Renderer:
                 ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
             self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, t.lo_row_empty, bgc, dep, t.bg_packed,
                                        packed, *untouched_tiles(t, image, packed), t.dirty, t.dirty_prev if t.mesh else t.dirty,
-                                       t.touched_lo, t.edges, ex0, ey0, ex1, ey1, *common)
+                                       t.touched_lo, t.edges, t.edge_rows, ex0, ey0, ex1, ey1, *common)
         else:
             self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,
                                         dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)

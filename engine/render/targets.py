@@ -88,6 +88,7 @@ class FrameTargets:
         self.dirty.fill(0)
         self.edges = ti.ndarray(ti.i32, shape=self.T0)
         self.edges.fill(-1)  # per tile: is the upsample bilateral anywhere (-1: not yet known)
+        self.edge_rows = ti.ndarray(ti.i32, shape=self.T0 * TILE)  # and where: a mask per pixel row
         self.pairs = None
         self.grow_pairs(pairs)
         self.mesh = mesh

@@ -3,9 +3,9 @@ interpolated along x, and the bilinear or bilateral sample a pixel takes of it.
 
 Bilinear where the reduced depths under a pixel agree; bilateral (depth-aware) where they differ by
 more than 10 % of the pixel's depth: each of the four nearest texels weighs bilinear ×
-1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface. Whether
-a tile needs the bilateral weights anywhere (``tile_is_edge``) depends on depths alone, so the
-composite keeps it per tile (engine.render.composite).
+1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface. Which
+of a tile's pixels need the bilateral weights (``tile_edge_rows``) depends on depths alone, so
+the composite keeps it per tile (engine.render.composite).
 
 The reduced level is stored after the full one in the same flat arrays: texel (x, y) at
 LO + y·Wl + x, LO = W·H; the coarse level (half the reduced scale) after it, at LC + y·Wc + x.
@@ -97,23 +97,28 @@ def co_mix(acc: ti.template(), k, w):
 
 
 @ti.func
-def tile_is_edge(px0, py0, px1, py1, dep: ti.template(), LO, W, Wl, Hl, s):
-    """Whether ``lo_sample`` goes bilateral at any pixel of the tile: ``lo_edge`` (the tile's
-    test) and, at some pixel, ``quad_is_edge`` (the pixel's) — where neither holds the tile is
-    bilinear throughout, the same values the hoisted bilinear path gives. A receding floor
-    passes the tile's test (its depth grows by more than 10 % over a tile's footprint beyond
-    a few metres) and fails the pixel's (over two texels it grows by less)."""
+def tile_edge_rows(px0, py0, px1, py1, dep: ti.template(), LO, W, Wl, Hl, s,
+                   edge_rows: ti.template(), at):
+    """Where ``lo_sample`` goes bilateral in the tile: ``edge_rows[at + y − py0]`` gets, for each
+    pixel row y, a mask with bit x − px0 set where ``quad_is_edge`` holds at pixel (x, y) — none
+    unless ``lo_edge`` (the tile's test) holds — and the return is whether any bit is set. Where
+    a bit is clear the upsample is bilinear, the value the hoisted bilinear path gives. A
+    receding floor passes the tile's test (its depth grows by more than 10 % over a tile's
+    footprint beyond a few metres) and fails the pixel's (over two texels it grows by less)."""
     e = lo_edge(px0, py0, px1, py1, dep, LO, Wl, Hl, s)
-    if e != 0:
-        e = 0
-        for y in range(py0, py1 + 1):
+    any_edge = 0
+    for y in range(py0, py1 + 1):
+        mask = 0
+        if e != 0:
             for x in range(px0, px1 + 1):
                 ja, jb, xa, xb, fx, fy = lo_quad(x, y, s, Wl, Hl)
                 ra, rb = LO + ja * Wl, LO + jb * Wl
                 if quad_is_edge(dep[ra + xa], dep[ra + xb], dep[rb + xa], dep[rb + xb],
                                 dep[y * W + x]):
-                    e = 1
-    return e
+                    mask |= 1 << (x - px0)
+        edge_rows[at + y - py0] = mask
+        any_edge |= mask
+    return ti.select(any_edge != 0, 1, 0)
 
 
 @ti.func
