@@ -304,6 +304,22 @@ def test_once_every_particle_is_gone_the_frame_is_the_background_again(schedule,
     s.close()
 
 
+def _puffs(width, height):
+    """Big alpha puffs (coarse level), small ones (reduced) and an additive glow (coarse)."""
+    return {
+        "name": "puffs", "fps": 60, "frames": 60, "seed": 3,
+        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
+        "render": {"width": width, "height": height, "particle_resolution": 0.25},
+        "emitters": [
+            {"name": "big", "position": [0.0, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 60.0, "lifetime": 1.0,
+             "blend": "alpha", "size": [[0.0, 1.5], [1.0, 2.5]], "alpha": [[0.0, 0.5]],
+             "color": [[0.0, 0.8, 0.8, 0.9]]},
+            {"name": "small", "position": [0.5, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 60.0, "lifetime": 1.0,
+             "blend": "alpha", "size": [[0.0, 0.4]], "alpha": [[0.0, 0.7]], "color": [[0.0, 0.3, 0.5, 0.9]]},
+            {"name": "glow", "position": [-0.5, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 30.0, "lifetime": 1.0,
+             "blend": "additive", "size": [[0.0, 2.0]], "alpha": [[0.0, 0.3]], "color": [[0.0, 1.0, 0.5, 0.1]]}]}
+
+
 def test_coarse_level_draws_what_the_reduced_level_would(monkeypatch):
     """Big sprites (radius ≥ 4 coarse texels) go to the coarse level at half the reduced scale,
     whose sums the reduced level adds before it resolves (light and OIT sums add, transmittances
@@ -312,18 +328,7 @@ def test_coarse_level_draws_what_the_reduced_level_would(monkeypatch):
     out, mean 6.3, or its transmittance, 5.3), and both schedules draw the same image."""
     import engine.render.renderer as renderer_module
 
-    s = ParticleScene.from_dict({
-        "name": "puffs", "fps": 60, "frames": 60, "seed": 3,
-        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
-        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
-        "emitters": [
-            {"name": "big", "position": [0.0, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 60.0, "lifetime": 1.0,
-             "blend": "alpha", "size": [[0.0, 1.5], [1.0, 2.5]], "alpha": [[0.0, 0.5]],
-             "color": [[0.0, 0.8, 0.8, 0.9]]},
-            {"name": "small", "position": [0.5, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 60.0, "lifetime": 1.0,
-             "blend": "alpha", "size": [[0.0, 0.4]], "alpha": [[0.0, 0.7]], "color": [[0.0, 0.3, 0.5, 0.9]]},
-            {"name": "glow", "position": [-0.5, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 30.0, "lifetime": 1.0,
-             "blend": "additive", "size": [[0.0, 2.0]], "alpha": [[0.0, 0.3]], "color": [[0.0, 1.0, 0.5, 0.1]]}]})
+    s = ParticleScene.from_dict(_puffs(320, 180))
     for _ in range(40):
         s.step(1 / 60)
     coarse = s.render().copy()
@@ -450,3 +455,47 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
     np.testing.assert_array_equal(marked[body], computed[body])
     np.testing.assert_array_equal(marked[~body], packed.view(np.uint32).reshape(H, W)[~body])
     assert (computed[~body] != marked[~body]).mean() > 0.9  # (the copy is seen)
+
+
+@pytest.mark.parametrize("schedule", ["tiles", "pixels"])
+def test_a_reduced_tile_mixes_in_the_coarse_level_only_where_it_drew_under_it(schedule):
+    """A reduced tile adds the coarse level's sums only where some coarse texel its texels read
+    (``co_quad``'s bilinear footprint) holds a sprite's sums, not wherever a coarse tile under it
+    was drawn: a tile with no sprite of its own and nothing drawn under it is not counted as drawn
+    (``touched_lo``), so the composite shows the background there; the per-pixel schedule keeps
+    the same rule (bit 1 of ``touched_lo``) and draws the same image."""
+    import math
+
+    s = ParticleScene.from_dict(_puffs(640, 360))
+    for _ in range(40):
+        s.step(1 / 60)
+    if schedule == "pixels":
+        s.scene.renderer = _other_schedule(s.scene, "pixels")
+    img = s.render()
+    t = s.scene.renderer.targets(640, 360)
+    acc_a, acc_b = t.accA.to_numpy()[t.LC:t.LC + t.Wc * t.Hc], t.accB.to_numpy()[t.LC:t.LC + t.Wc * t.Hc]
+    drawn = ((acc_a != (0.0, 0.0, 0.0, 1.0)).any(-1) | (acc_b != 0.0).any(-1)).reshape(t.Hc, t.Wc)
+    touched_co = t.touched_co.to_numpy() != 0
+    own = t.tile_count.to_numpy()[t.T0:t.T0 + t.T1] > 0
+    touched = t.touched_lo.to_numpy()
+    coarse_tile_under = mixed = 0
+    for ty in range(t.TYl):
+        for tx in range(t.TXl):
+            x0, y0 = 16 * tx, 16 * ty
+            x1, y1 = min(t.Wl - 1, x0 + 15), min(t.Hl - 1, y0 + 15)
+            cx0, cx1 = max(0, math.floor((x0 + 0.5) / 2 - 0.5)), min(t.Wc - 1, math.floor((x1 + 0.5) / 2 - 0.5) + 1)
+            cy0, cy1 = max(0, math.floor((y0 + 0.5) / 2 - 0.5)), min(t.Hc - 1, math.floor((y1 + 0.5) / 2 - 0.5) + 1)
+            under = touched_co.reshape(t.TYc, t.TXc)[cy0 // 16:cy1 // 16 + 1, cx0 // 16:cx1 // 16 + 1].any()
+            mix = bool(drawn[cy0:cy1 + 1, cx0:cx1 + 1].any())
+            k = ty * t.TXl + tx
+            assert (touched[k] != 0) == (own[k] or mix), (tx, ty)
+            if schedule == "pixels":
+                assert (touched[k] & 2 != 0) == mix, (tx, ty)
+            coarse_tile_under += under and not mix
+            mixed += mix
+    assert coarse_tile_under > 0 and mixed > 0  # (the rule is exercised both ways)
+    assert img[..., :3].std() > 20
+    if schedule == "pixels":
+        other = _other_schedule(s.scene, "tiles").render(s.scene.camera, 640, 360)
+        assert np.abs(other.astype(int) - img.astype(int)).max() <= 1
+    s.close()

@@ -11,7 +11,8 @@ reduced scale; engine.render.composite): ``depth`` (the reduced parts: the farth
 each texel), ``accA``/``accB`` vec4 splat accumulators (engine.render.splat), written only in tiles
 that hold sprites (the full part tile by tile, each tile one contiguous run:
 ``composite.tile_rows``; the reduced part ends as the layer (RGB, T), the coarse one keeps its sums);
-``touched_lo`` (T1,) reduced tiles drawn (their own sprites or the coarse level's under them),
+``touched_lo`` (T1,) reduced tiles drawn (their own sprites or the coarse level's under them;
+non-zero: drawn — the GPU's schedule keeps in bit 1 whether the coarse level was mixed in),
 ``touched_co`` (T2,) coarse tiles holding sprites. Tiles (full, reduced, coarse: T0 + T1 + T2 =
 T in one index space): ``hist``
 (chunks, T) i32, ``tile_count``/``tile_start`` (T,), ``block_sum``, ``pairs`` (grows). Soft bodies:
