@@ -13,7 +13,7 @@ EXPECTED = {
              "bandwidth limit 100k"],
     "frame": ["frame (step + render)", "frame, per-pixel schedule", "step (advance_frame)", "render",
               "render, background redrawn"],
-    "effects": ["sparks", "worst effect", "empty scene, render only"],
+    "effects": ["sparks", "composite, sparks", "worst effect", "empty scene, render only"],
     "ode": ["engine RK4 step doubling (f32)", "scipy solve_ivp RK45 (f64)"],
     "startup": ["cold (empty offline cache)", "warm (offline cache filled)"],
     "features": ["all features", "none of them", "impacts projected", "impacts located"],
