@@ -446,7 +446,8 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
                              np.full(Hl * TX, row_empty_value, np.int32), nd(v4, frame_bg),
                              nd(ti.f32, np.ones(LO + Wl * Hl, np.float32)), packed, out,
                              np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,
-                             np.zeros(TX * TY * 16, np.int32), 1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s, 1, 1.0, 0.9, 0)
+                             np.zeros(TX * TY * 16, np.int32), 1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s,
+                             1, 1.0, 0.9, 0)
         return out.reshape(H, W)
 
     marked, computed = composite(1), composite(0)
@@ -483,8 +484,11 @@ def test_a_reduced_tile_mixes_in_the_coarse_level_only_where_it_drew_under_it(sc
         for tx in range(t.TXl):
             x0, y0 = 16 * tx, 16 * ty
             x1, y1 = min(t.Wl - 1, x0 + 15), min(t.Hl - 1, y0 + 15)
-            cx0, cx1 = max(0, math.floor((x0 + 0.5) / 2 - 0.5)), min(t.Wc - 1, math.floor((x1 + 0.5) / 2 - 0.5) + 1)
-            cy0, cy1 = max(0, math.floor((y0 + 0.5) / 2 - 0.5)), min(t.Hc - 1, math.floor((y1 + 0.5) / 2 - 0.5) + 1)
+            # the coarse texels co_quad reads for these reduced texels (half their scale)
+            cx0 = max(0, math.floor((x0 + 0.5) / 2 - 0.5))
+            cx1 = min(t.Wc - 1, math.floor((x1 + 0.5) / 2 - 0.5) + 1)
+            cy0 = max(0, math.floor((y0 + 0.5) / 2 - 0.5))
+            cy1 = min(t.Hc - 1, math.floor((y1 + 0.5) / 2 - 0.5) + 1)
             under = touched_co.reshape(t.TYc, t.TXc)[cy0 // 16:cy1 // 16 + 1, cx0 // 16:cx1 // 16 + 1].any()
             mix = bool(drawn[cy0:cy1 + 1, cx0:cx1 + 1].any())
             k = ty * t.TXl + tx

@@ -179,8 +179,8 @@ def _build(uses_add: bool, uses_alpha: bool):
                         bg_packed: ND_U64, out: ND_U32, out64: ND_U64, copy: ti.i32, dirty: ND_I1,
                         dirty_prev: ND_I1,
                         touched_lo: ND_I1, edges: ND_I1, edge_rows: ND_I1, ex0: ti.i32, ey0: ti.i32,
-                        ex1: ti.i32, ey1: ti.i32, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32, TXl: ti.i32,
-                        Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
+                        ex1: ti.i32, ey1: ti.i32, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32,
+                        TXl: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
                         shading: ti.f32, mode: ti.i32):
         """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
         the background, tone-mapped and packed. An untouched tile copies the packed background
@@ -192,7 +192,8 @@ def _build(uses_add: bool, uses_alpha: bool):
         valid where ``edges`` is not −1), for they depend on the depths alone, which change only
         where the background was redrawn — the tiles [ex0, ex1] × [ey0, ey1] (empty when
         ex0 > ex1), given with one tile of margin, since a tile's upsample reads texels up to
-        2 / s pixels past its edge — or where soft bodies drew this frame or the last (``dirty``, ``dirty_prev``: a tile next to such a tile too).
+        2 / s pixels past its edge — or where soft bodies drew this frame or the last (``dirty``,
+        ``dirty_prev``: a tile next to such a tile too).
 
         ``row_empty`` (Hl·TX,): per reduced row and tile column, whether the reduced layer is
         empty there (``upsample.lo_rows``); a tile row under only the reduced layer whose two rows
