@@ -88,3 +88,14 @@ def drawn_scene(path: str, frames: int = 20, size=(160, 90), **render):
 def run_frames(scene, frames: int) -> None:
     for _ in range(frames):
         scene.advance_frame()
+
+
+def other_schedule(scene, schedule: str):
+    """A second renderer of ``scene`` (an ``engine.scene.Scene``), built as the scene builds its
+    own (soft and rigid bodies both drawn), with this schedule ("tiles" or "pixels")."""
+    from engine.render.renderer import Renderer
+
+    p = scene.particles
+    meshes = scene.bodies + ([scene.rigid] if scene.rigid is not None else [])
+    return Renderer(p.state if p else None, scene.cfg.emitters, scene.colliders, scene.cfg.render,
+                    bodies=meshes, rows=p.emitters.count if p else 0, schedule=schedule)

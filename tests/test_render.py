@@ -1,22 +1,13 @@
 """The renderer: two schedules, one image; determinism; sizes, cameras and overlays without
-recompiling; the reduced-resolution layer; what the output array holds."""
+recompiling; what the output array holds. (The reduced and coarse layers, their upsample and
+the composite's skips: ``test_reduced_layer.py``.)"""
 import numpy as np
 import pytest
 
-from helpers import drawn_scene, on_thread_counts
+from helpers import drawn_scene, on_thread_counts, other_schedule
 
 from engine.api import ParticleScene
-from engine.render.renderer import MAX_SIZES_KEPT, Renderer
-from engine.render.resolution import particle_scale
-
-
-def _other_schedule(s, schedule):
-    """A second renderer of scene ``s``, built as the scene builds its own (soft and rigid
-    bodies both drawn), with this schedule."""
-    p = s.particles
-    meshes = s.bodies + ([s.rigid] if s.rigid is not None else [])
-    return Renderer(p.state if p else None, s.cfg.emitters, s.colliders, s.cfg.render,
-                    bodies=meshes, rows=p.emitters.count if p else 0, schedule=schedule)
+from engine.render.renderer import MAX_SIZES_KEPT
 
 
 @pytest.mark.parametrize("path, res", [("configs/sparks.toml", 1),
@@ -29,67 +20,12 @@ def test_per_pixel_schedule_draws_the_per_tile_image(path, res):
     compiler rounding (fast math may fuse differently in the two kernels)."""
     s = drawn_scene(path, size=(192, 108), particle_resolution=res)
     tiles = s.render()
-    pixels = _other_schedule(s, "pixels").render(s.camera, 192, 108)
+    pixels = other_schedule(s, "pixels").render(s.camera, 192, 108)
     diff = np.abs(tiles.astype(int) - pixels.astype(int))
     assert tiles[..., :3].std() > 3  # something was drawn
     assert diff.max() <= 1 and (diff > 0).mean() < 2e-3, (diff.max(), (diff > 0).mean())
     if res != 1:
         assert s.renderer.targets(192, 108).has_lo
-
-
-@pytest.mark.parametrize("per_pixel", [False, True])
-@pytest.mark.parametrize("k", [2, 4])
-def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_pixel, k):
-    """``lo_rows``, both loop shapes (a thread a row walking texel pairs: the CPU's; a thread a
-    texel: the GPU's), at both reduced scales (1/k): a needed row holds the reduced layer
-    interpolated along x (a NumPy reference), a row no drawn reduced tile reaches keeps what
-    it held. The CPU's also marks each needed row's tile columns whose values are all the empty
-    layer (0, 0, 0, 1), exactly those (texel runs set empty in the middle and at the right edge,
-    where the last tile column is cut short)."""
-    import taichi as ti
-
-    from engine.render.sprites import TILE
-    from engine.render.targets import reduced_size, tiles_for
-    from engine.render.upsample import lo_rows
-
-    W, H, s = 253, 256, 1.0 / k  # (a width no multiple of k: the last texel pair is cut short)
-    Wl, Hl = reduced_size(W, H, s)
-    TXl, TYl = tiles_for(Wl, Hl)
-    R = int(TILE * s) + 3
-    rng = np.random.default_rng(5)
-    lo_np = rng.random((W * H + Wl * Hl, 4), dtype=np.float32)
-    layer = lo_np[W * H:].reshape(Hl, Wl, 4)  # (a view)
-    layer[:, 20:40] = layer[:, Wl - 10:] = (0.0, 0.0, 0.0, 1.0)
-    layer[17, 30] = (0.0, 0.0, 0.0, 0.999)  # not empty: its tile columns in row 17 are not
-    touched_np = np.zeros(TXl * TYl, np.int32)
-    touched_np[1 * TXl + 1] = 1  # one drawn reduced tile: reduced rows 16..31
-    lo = ti.ndarray(ti.types.vector(4, ti.f32), lo_np.shape[0])
-    lo.from_numpy(lo_np)
-    touched = ti.ndarray(ti.i32, touched_np.shape[0])
-    touched.from_numpy(touched_np)
-    rows = ti.ndarray(ti.types.vector(4, ti.f32), Hl * W)
-    rows.fill(-7.0)
-    TX = tiles_for(W, H)[0]
-    row_empty = ti.ndarray(ti.i32, Hl * TX)
-    row_empty.fill(-1)
-    lo_rows(lo, rows, row_empty, W, H, Wl, Hl, s, touched, TXl, TYl, R, per_pixel, k)
-    got = rows.to_numpy().reshape(Hl, W, 4)
-    u = (np.arange(W) + 0.5) * s - 0.5
-    i0 = np.floor(u).astype(int)
-    fx = (u - i0)[:, None]
-    want = (1 - fx) * layer[:, np.clip(i0, 0, Wl - 1)] + fx * layer[:, np.clip(i0 + 1, 0, Wl - 1)]
-    needed = np.zeros(Hl, bool)
-    needed[16 - R:31 + R + 1] = True  # the rows within R of the drawn tile's
-    np.testing.assert_allclose(got[needed], want[needed], rtol=1e-6, atol=1e-6)
-    assert (got[~needed] == -7.0).all()
-    if not per_pixel:
-        flags = row_empty.to_numpy().reshape(Hl, TX)
-        empty = np.pad((want == (0.0, 0.0, 0.0, 1.0)).all(-1), ((0, 0), (0, TX * TILE - W)),
-                       constant_values=True).reshape(Hl, TX, TILE).all(-1)
-        assert empty[needed][:, -1].all() and empty[needed][:, :-1].any(axis=1).sum() >= needed.sum() - 1
-        assert not empty[17].all() and empty[16].sum() > empty[17].sum()
-        np.testing.assert_array_equal(flags[needed], empty[needed])
-        assert (flags[~needed] == -1).all()
 
 
 _PROBE = """
@@ -213,27 +149,6 @@ def test_pair_list_grows_without_changing_the_image():
     assert t.pair_capacity >= s.renderer.last_pairs > 16
 
 
-@pytest.mark.slow
-def test_reduced_layer_stays_close_to_full_resolution():
-    """Smoke drawn into the ¼-resolution layer and upsampled looks like smoke drawn at full
-    resolution: small differences, spread thin, no shift in overall brightness."""
-    full = drawn_scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=1)
-    quarter = drawn_scene("configs/smoke.toml", frames=40, size=(320, 180), particle_resolution=0.25)
-    a = full.render()[..., :3].astype(float)
-    b = quarter.render()[..., :3].astype(float)
-    assert quarter.renderer.targets(320, 180).has_lo and not full.renderer.targets(320, 180).has_lo
-    diff = np.abs(a - b)
-    assert a.std() > 3 and diff.mean() < 1.5 and np.percentile(diff, 99) < 16, (diff.mean(), np.percentile(diff, 99))
-    assert abs(a.mean() - b.mean()) < 1.0
-
-
-def test_auto_resolution_follows_the_image_height():
-    assert particle_scale("auto", 180) == 1.0
-    assert particle_scale("auto", 360) == 0.5
-    assert particle_scale("auto", 720) == 0.25
-    assert particle_scale(0.5, 4000) == 0.5 and particle_scale(1, 4000) == 1.0
-
-
 def test_transparent_overlay_is_premultiplied_with_alpha_zero_where_nothing_is_drawn():
     s = ParticleScene.from_dict({  # additive sparks and alpha smoke, nothing else to compile
         "seed": 1, "fps": 30, "frames": 1, "camera": {"position": [0.0, 1.0, 5.0], "look_at": [0.0, 1.0, 0.0]},
@@ -264,242 +179,3 @@ def test_render_into_a_given_array_and_refuse_a_wrong_one():
                 np.zeros((96, 54, 4), np.uint8), np.zeros((54, 192, 4), np.uint8)[:, ::2]):
         with pytest.raises(ValueError, match="out"):
             s.render(out=bad)
-
-
-def _levels(s):
-    """The levels (0 full, 1 reduced, 2 coarse) of the sprites the scene's last frame drew."""
-    info = s.scene.renderer.records.spr_info.to_numpy()
-    return set(np.unique(info[info[:, 0] != 0, 2]).tolist())
-
-
-@pytest.mark.parametrize("schedule, size, level", [("tiles", 0.6, 1), pytest.param("pixels", 0.6, 1, marks=pytest.mark.slow),
-                                                   pytest.param("tiles", 2.0, 2, marks=pytest.mark.slow),
-                                                   ("pixels", 2.0, 2)])
-def test_once_every_particle_is_gone_the_frame_is_the_background_again(schedule, size, level):
-    """A frame with nothing to draw skips the splat only once no reduced or coarse tile is left
-    drawn from the last one: the first empty frame after smoke in the reduced layer (0.6 m puffs,
-    16 px) or the coarse one (2 m puffs, 54 px) resets it, and it and every later one equal the
-    background alone (the frame before anything was born)."""
-    s = ParticleScene.from_dict({
-        "name": "puff", "fps": 60, "frames": 60,
-        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
-        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
-        "emitters": [{"name": "puff", "position": [0.0, 1.0, 0.0], "speed": [0.0, 0.2],
-                      "bursts": [{"time": 0.0, "count": 40}], "lifetime": 0.2, "blend": "alpha",
-                      "size": [[0.0, size]], "alpha": [[0.0, 0.8]]}]})
-    if schedule == "pixels":
-        s.scene.renderer = _other_schedule(s.scene, "pixels")
-    background = s.render().copy()
-    s.step(1 / 60)
-    drawn = s.render().copy()
-    t = s.scene.renderer.targets(320, 180)
-    assert t.has_lo and not t.lo_clear and np.abs(drawn.astype(int) - background).sum() > 1000
-    assert _levels(s) == {level}
-    for _ in range(30):  # past every particle's lifetime
-        s.step(1 / 60)
-    assert s.particles()["position"].shape[0] == 0
-    for _ in range(3):  # the first empty frame splats (resetting the reduced tiles), the others skip
-        assert np.array_equal(s.render(), background)
-    assert t.lo_clear
-    s.close()
-
-
-def _puffs(width, height):
-    """Big alpha puffs (coarse level), small ones (reduced) and an additive glow (coarse)."""
-    return {
-        "name": "puffs", "fps": 60, "frames": 60, "seed": 3,
-        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
-        "render": {"width": width, "height": height, "particle_resolution": 0.25},
-        "emitters": [
-            {"name": "big", "position": [0.0, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 60.0, "lifetime": 1.0,
-             "blend": "alpha", "size": [[0.0, 1.5], [1.0, 2.5]], "alpha": [[0.0, 0.5]],
-             "color": [[0.0, 0.8, 0.8, 0.9]]},
-            {"name": "small", "position": [0.5, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 60.0, "lifetime": 1.0,
-             "blend": "alpha", "size": [[0.0, 0.4]], "alpha": [[0.0, 0.7]], "color": [[0.0, 0.3, 0.5, 0.9]]},
-            {"name": "glow", "position": [-0.5, 1.0, 0.0], "speed": [0.2, 0.8], "rate": 30.0, "lifetime": 1.0,
-             "blend": "additive", "size": [[0.0, 2.0]], "alpha": [[0.0, 0.3]], "color": [[0.0, 1.0, 0.5, 0.1]]}]}
-
-
-def test_coarse_level_draws_what_the_reduced_level_would(monkeypatch):
-    """Big sprites (radius ≥ 4 coarse texels) go to the coarse level at half the reduced scale,
-    whose sums the reduced level adds before it resolves (light and OIT sums add, transmittances
-    multiply): the picture is the one the reduced level alone draws but for the coarser sampling
-    (measured at 8 px texels: mean 0.95 of 255, 99th percentile 23; with the coarse OIT sums left
-    out, mean 6.3, or its transmittance, 5.3), and both schedules draw the same image."""
-    import engine.render.renderer as renderer_module
-
-    s = ParticleScene.from_dict(_puffs(320, 180))
-    for _ in range(40):
-        s.step(1 / 60)
-    coarse = s.render().copy()
-    assert _levels(s) == {1, 2} and coarse[..., :3].std() > 20
-    pixels = _other_schedule(s.scene, "pixels").render(s.scene.camera, 320, 180)
-    assert np.abs(coarse.astype(int) - pixels.astype(int)).max() <= 1
-    monkeypatch.setattr(renderer_module, "CO_MIN_TEXELS", 1e9)  # every big sprite at the reduced level
-    reduced = s.render()
-    assert _levels(s) == {1}
-    d = np.abs(coarse.astype(int) - reduced.astype(int))[..., :3]
-    assert d.mean() < 1.5 and np.percentile(d, 99) < 32, (d.mean(), np.percentile(d, 99))
-    s.close()
-
-
-def _fresh_edges(s, t):
-    """The image the renderer draws with every cached edge flag forgotten (recomputed); first,
-    that every flag the cache held for a tile the composite reads it for is the recomputed one."""
-    cached = t.edges.to_numpy()
-    t.edges.fill(-1)
-    img = s.render()
-    fresh = t.edges.to_numpy()
-    known = fresh >= 0
-    assert np.array_equal(cached[known], fresh[known]), np.flatnonzero(cached[known] != fresh[known])
-    return img
-
-
-@pytest.mark.slow  # (default run kept under 5 minutes cold; a moving body's case runs by default)
-def test_cached_edge_flags_follow_the_camera():
-    """The composite caches per tile whether the reduced layer's upsample is bilateral anywhere
-    in it (depths only). Smoke over a ground plane seen from a camera tilting down: the horizon,
-    where the upsample is bilateral, moves, and each frame equals one drawn with the flags
-    recomputed from nothing (a stale flag would leave the old horizon's tiles bilinear)."""
-    s = drawn_scene("configs/flames.toml", frames=40, size=(320, 180), particle_resolution=0.25)
-    t = s.renderer.targets(320, 180)
-    cam = s.camera
-    seen = []
-    for k, y in enumerate((0.9, 0.2, -0.6)):
-        s.camera = cam.__class__(cam.position, (cam.look_at[0], y, cam.look_at[2]), cam.fov)
-        img = s.render()
-        seen.append(t.edges.to_numpy())
-        assert np.array_equal(_fresh_edges(s, t), img), k
-        assert np.array_equal(t.edges.to_numpy(), seen[-1])
-    # the flags changed with the view (the test is not vacuous): some tile edged in one, not another
-    assert all((a == 1).any() for a in seen)
-    assert any(((a == 1) & (b == 0)).any() for a, b in zip(seen, seen[1:]))
-
-
-def test_cached_edge_flags_follow_a_moving_body():
-    """A jelly falls through a cloud of smoke, drawn into the frame's own depth: where it drew this
-    frame or the last, and next to it, the flags are recomputed — every cached flag equals the
-    recomputed one and each frame the image drawn with all of them recomputed (checked to fail
-    with only the drawn tiles themselves recomputed: a tile's upsample reads texels 4 px into
-    its neighbours)."""
-    s = ParticleScene.from_dict({
-        "name": "jelly through smoke", "fps": 30, "frames": 30,
-        "camera": {"position": [0.0, 1.0, 6.0], "look_at": [0.0, 1.0, 0.0]},
-        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
-        "emitters": [{"name": "cloud", "effect": "smoke", "shape": "sphere", "radius": 1.2,
-                      "position": [0.0, 1.0, 0.0], "speed": [0.0, 0.05], "turbulence": 0.0,
-                      "bursts": [{"time": 0.0, "count": 300}], "lifetime": 5.0,
-                      "size": [[0.0, 0.6]], "alpha": [[0.0, 0.3]]}],
-        "bodies": [{"type": "jelly", "name": "jelly", "resolution": [4, 4, 4], "size": [0.8, 0.8, 0.8],
-                    "position": [-0.4, 2.6, 1.0], "mass": 0.01, "stiffness": 300.0}]})
-    s.render()
-    t = s.scene.renderer.targets(320, 180)
-    changed = 0
-    for k in range(12):
-        s.step(1 / 30)
-        before = t.edges.to_numpy()
-        img = s.render().copy()
-        changed += int(((before == 0) & (t.edges.to_numpy() == 1)).any())
-        assert np.array_equal(_fresh_edges(s, t), img), k
-    assert changed > 0  # the jelly made some tile's upsample bilateral on its way (not vacuous)
-    s.close()
-
-
-def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_drew():
-    """``composite_tiles`` shows a tile row whose two reduced rows are marked empty
-    (``lo_rows``' ``row_empty``) as the packed background — except in a tile a soft or rigid body
-    drew in (``dirty``), whose background is the frame's own (bodies drawn in), not the packed
-    one: there it composites as if unmarked. A 32 × 32 image (2 × 2 tiles) at s = 1/4, the
-    reduced layer empty, one reduced tile drawn (every tile is near it), no sprite at full
-    resolution; the packed background made from other colours than the frame's, so each copy
-    shows."""
-    import taichi as ti
-
-    from engine.render.composite import build_composite_kernels
-
-    k = build_composite_kernels(False, True)
-    W = H = 32
-    s, TX, TY = 0.25, 2, 2
-    Wl = Hl = 8
-    px, LO = W * H, W * H
-    v4 = ti.types.vector(4, ti.f32)
-    rng = np.random.default_rng(3)
-
-    def nd(dtype, a):
-        arr = ti.ndarray(dtype, a.shape[0])
-        arr.from_numpy(a)
-        return arr
-
-    frame_bg = rng.random((px, 4), dtype=np.float32)
-    frame_bg[:, 3] = 0.0
-    other_bg = frame_bg[::-1].copy()  # what the packed background was drawn from
-    packed = np.zeros(px // 2, np.uint64)
-    k["pack_background"](nd(v4, other_bg), packed, W, H, 0, 0, W, H, 1.0, 0)
-    acc = nd(v4, np.tile(np.float32([0, 0, 0, 1]), (LO + Wl * Hl + 16, 1)))
-    rows = nd(v4, np.tile(np.float32([0, 0, 0, 1]), (Hl * W, 1)))
-    dirty = np.int32([1, 0, 0, 0])  # a body drew in tile 0
-
-    def composite(row_empty_value):
-        out = np.zeros(px, np.uint32)
-        edges = nd(ti.i32, np.full(TX * TY, -1, np.int32))
-        k["composite_tiles"](np.zeros(TX * TY, np.int32), acc, acc, rows,
-                             np.full(Hl * TX, row_empty_value, np.int32), nd(v4, frame_bg),
-                             nd(ti.f32, np.ones(LO + Wl * Hl, np.float32)), packed, out,
-                             np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,
-                             np.zeros(TX * TY * 16, np.int32), 1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s,
-                             1, 1.0, 0.9, 0)
-        return out.reshape(H, W)
-
-    marked, computed = composite(1), composite(0)
-    body = np.zeros((H, W), bool)
-    body[:16, :16] = True  # tile 0
-    np.testing.assert_array_equal(marked[body], computed[body])
-    np.testing.assert_array_equal(marked[~body], packed.view(np.uint32).reshape(H, W)[~body])
-    assert (computed[~body] != marked[~body]).mean() > 0.9  # (the copy is seen)
-
-
-@pytest.mark.parametrize("schedule", ["tiles", "pixels"])
-def test_a_reduced_tile_mixes_in_the_coarse_level_only_where_it_drew_under_it(schedule):
-    """A reduced tile adds the coarse level's sums only where some coarse texel its texels read
-    (``co_quad``'s bilinear footprint) holds a sprite's sums, not wherever a coarse tile under it
-    was drawn: a tile with no sprite of its own and nothing drawn under it is not counted as drawn
-    (``touched_lo``), so the composite shows the background there; the per-pixel schedule keeps
-    the same rule (bit 1 of ``touched_lo``) and draws the same image."""
-    import math
-
-    s = ParticleScene.from_dict(_puffs(640, 360))
-    for _ in range(40):
-        s.step(1 / 60)
-    if schedule == "pixels":
-        s.scene.renderer = _other_schedule(s.scene, "pixels")
-    img = s.render()
-    t = s.scene.renderer.targets(640, 360)
-    acc_a, acc_b = t.accA.to_numpy()[t.LC:t.LC + t.Wc * t.Hc], t.accB.to_numpy()[t.LC:t.LC + t.Wc * t.Hc]
-    drawn = ((acc_a != (0.0, 0.0, 0.0, 1.0)).any(-1) | (acc_b != 0.0).any(-1)).reshape(t.Hc, t.Wc)
-    touched_co = t.touched_co.to_numpy() != 0
-    own = t.tile_count.to_numpy()[t.T0:t.T0 + t.T1] > 0
-    touched = t.touched_lo.to_numpy()
-    coarse_tile_under = mixed = 0
-    for ty in range(t.TYl):
-        for tx in range(t.TXl):
-            x0, y0 = 16 * tx, 16 * ty
-            x1, y1 = min(t.Wl - 1, x0 + 15), min(t.Hl - 1, y0 + 15)
-            # the coarse texels co_quad reads for these reduced texels (half their scale)
-            cx0 = max(0, math.floor((x0 + 0.5) / 2 - 0.5))
-            cx1 = min(t.Wc - 1, math.floor((x1 + 0.5) / 2 - 0.5) + 1)
-            cy0 = max(0, math.floor((y0 + 0.5) / 2 - 0.5))
-            cy1 = min(t.Hc - 1, math.floor((y1 + 0.5) / 2 - 0.5) + 1)
-            under = touched_co.reshape(t.TYc, t.TXc)[cy0 // 16:cy1 // 16 + 1, cx0 // 16:cx1 // 16 + 1].any()
-            mix = bool(drawn[cy0:cy1 + 1, cx0:cx1 + 1].any())
-            k = ty * t.TXl + tx
-            assert (touched[k] != 0) == (own[k] or mix), (tx, ty)
-            if schedule == "pixels":
-                assert (touched[k] & 2 != 0) == mix, (tx, ty)
-            coarse_tile_under += under and not mix
-            mixed += mix
-    assert coarse_tile_under > 0 and mixed > 0  # (the rule is exercised both ways)
-    assert img[..., :3].std() > 20
-    if schedule == "pixels":
-        other = _other_schedule(s.scene, "tiles").render(s.scene.camera, 640, 360)
-        assert np.abs(other.astype(int) - img.astype(int)).max() <= 1
-    s.close()
