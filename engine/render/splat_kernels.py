@@ -16,7 +16,7 @@ import taichi as ti
 from .binning import vec16
 from .splat import add_sprite, capsule_point, disc_weight, record_box
 from .sprites import TILE
-from .upsample import ND_F, ND_I1, ND_V4, co_mix, co_quad, lo_near
+from .upsample import ND_F, ND_I1, ND_V4, co_mix, co_quad, footprint, is_empty_layer, lo_near
 
 EMPTY_LAYER = ti.Vector([0.0, 0.0, 0.0, 1.0])  # a layer that draws nothing: RGB 0, T 1
 ND_PAIRS = ti.types.ndarray(dtype=vec16, ndim=1)  # the binned records, one per (tile, sprite)
@@ -181,19 +181,14 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
         (``lo_near`` says only that a coarse tile under it was drawn: about a third of those in
         explosion, campfire and debris at 1280×720 draw nothing under it), so it is neither mixed
         in nor, where no sprite of its own is drawn, the tile counted as drawn."""
-        lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * 0.5 - 0.5), ti.i32))
-        lx1 = ti.min(Wc - 1, ti.cast(ti.floor((px1 + 0.5) * 0.5 - 0.5), ti.i32) + 1)
-        ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * 0.5 - 0.5), ti.i32))
-        ly1 = ti.min(Hc - 1, ti.cast(ti.floor((py1 + 0.5) * 0.5 - 0.5), ti.i32) + 1)
+        lx0, lx1, ly0, ly1 = footprint(px0, py0, px1, py1, 0.5, Wc, Hc)
         drawn = 0
         for ly in range(ly0, ly1 + 1):
             for k in range(LC + ly * Wc + lx0, LC + ly * Wc + lx1 + 1):
-                a = accA[k]
-                if a[0] != 0.0 or a[1] != 0.0 or a[2] != 0.0 or a[3] != 1.0:
+                if not is_empty_layer(accA[k]):
                     drawn = 1
                 if ti.static(uses_alpha):
-                    b = accB[k]
-                    if b[0] != 0.0 or b[1] != 0.0 or b[2] != 0.0 or b[3] != 0.0:
+                    if (accB[k] != 0.0).any():
                         drawn = 1
         return drawn
 

@@ -122,13 +122,21 @@ def tile_edge_rows(px0, py0, px1, py1, dep: ti.template(), LO, W, Wl, Hl, s,
 
 
 @ti.func
-def lo_edge(px0, py0, px1, py1, depth_lo: ti.template(), LO, Wl, Hl, s):
-    """Whether the reduced depths a tile's upsample reads differ by more than 10 % (then the
-    bilateral weights are needed; elsewhere bilinear is the same and cheaper)."""
+def footprint(px0, py0, px1, py1, s, Wl, Hl):
+    """The texels [lx0, lx1] × [ly0, ly1] of a level at scale s (Wl × Hl texels) that the
+    bilinear upsample (``lo_quad``) reads for the pixels [px0, px1] × [py0, py1]."""
     lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * s - 0.5), ti.i32))
     lx1 = ti.min(Wl - 1, ti.cast(ti.floor((px1 + 0.5) * s - 0.5), ti.i32) + 1)
     ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * s - 0.5), ti.i32))
     ly1 = ti.min(Hl - 1, ti.cast(ti.floor((py1 + 0.5) * s - 0.5), ti.i32) + 1)
+    return lx0, lx1, ly0, ly1
+
+
+@ti.func
+def lo_edge(px0, py0, px1, py1, depth_lo: ti.template(), LO, Wl, Hl, s):
+    """Whether the reduced depths a tile's upsample reads differ by more than 10 % (then the
+    bilateral weights are needed; elsewhere bilinear is the same and cheaper)."""
+    lx0, lx1, ly0, ly1 = footprint(px0, py0, px1, py1, s, Wl, Hl)
     lo_z, hi_z = 1e30, 0.0
     for ly in range(ly0, ly1 + 1):
         for k in range(LO + ly * Wl + lx0, LO + ly * Wl + lx1 + 1):
@@ -140,10 +148,7 @@ def lo_edge(px0, py0, px1, py1, depth_lo: ti.template(), LO, Wl, Hl, s):
 @ti.func
 def lo_near(px0, py0, px1, py1, touched_lo: ti.template(), Wl, Hl, TXl, s):
     """Whether any reduced-layer tile the upsample reads for this tile holds sprites."""
-    lx0 = ti.max(0, ti.cast(ti.floor((px0 + 0.5) * s - 0.5), ti.i32))
-    lx1 = ti.min(Wl - 1, ti.cast(ti.floor((px1 + 0.5) * s - 0.5), ti.i32) + 1)
-    ly0 = ti.max(0, ti.cast(ti.floor((py0 + 0.5) * s - 0.5), ti.i32))
-    ly1 = ti.min(Hl - 1, ti.cast(ti.floor((py1 + 0.5) * s - 0.5), ti.i32) + 1)
+    lx0, lx1, ly0, ly1 = footprint(px0, py0, px1, py1, s, Wl, Hl)
     near = 0
     for ly in range(ly0 // TILE, ly1 // TILE + 1):
         for lx in range(lx0 // TILE, lx1 // TILE + 1):
@@ -172,8 +177,9 @@ def _row_texel(lo: ti.template(), j, x, LO, Wl, s):
 
 
 @ti.func
-def _is_empty(v):
-    """Whether a reduced texel is the empty layer (0, 0, 0, 1) exactly."""
+def is_empty_layer(v):
+    """Whether a texel (vec4) is the empty layer (0, 0, 0, 1) exactly: no light, transmittance 1
+    (a resolved reduced texel, or a coarse texel's sums A)."""
     return v[0] == 0.0 and v[1] == 0.0 and v[2] == 0.0 and v[3] == 1.0
 
 
@@ -198,9 +204,9 @@ def lo_rows(lo: ND_V4, rows: ND_V4, row_empty: ND_I1, W: ti.i32, H: ti.i32, Wl: 
     there are drawn from is the empty layer (0, 0, 0, 1) exactly. Then so is each of those values,
     and each vertical lerp of two such rows (the weights are multiples of 1/8 at s = 1/2 or 1/4,
     so (1 − f) + f = 1 exactly), and the composite's pixel there is the packed background's bit
-    for bit (c·1 + 0): ``composite_tiles`` copies it (40–50 % of the rows of the tiles under smoke
-    that hold no sprite of their own, in explosion, debris and campfire at 1280×720). The GPU's
-    composite does not read it."""
+    for bit (c·1 + 0): ``composite_tiles`` copies it (42–54 % of the rows of the tiles under
+    smoke that hold no sprite of their own, in explosion, debris and campfire at 1280×720). The
+    GPU's composite does not read it."""
     LO = W * H
     if ti.static(per_pixel):
         for j, x in ti.ndrange(Hl, W):
@@ -219,7 +225,7 @@ def lo_rows(lo: ND_V4, rows: ND_V4, row_empty: ND_I1, W: ti.i32, H: ti.i32, Wl: 
                 for i in range(-1, (W + k) // k):
                     a = lo[LO + j * Wl + ti.min(ti.max(i, 0), Wl - 1)]
                     b = lo[LO + j * Wl + ti.min(ti.max(i + 1, 0), Wl - 1)]
-                    both = ti.select(_is_empty(a) and _is_empty(b), 1, 0)
+                    both = ti.select(is_empty_layer(a) and is_empty_layer(b), 1, 0)
                     for m in ti.static(range(k)):
                         x = k * i + k // 2 + m
                         if 0 <= x < W:
