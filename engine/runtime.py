@@ -203,6 +203,11 @@ def _quicken_front_end() -> None:
         found = getattr(kernel_impl, name, None)
         if found is not None:
             setattr(kernel_impl, name, _memoized_by_function(found))
+    # and a vector's dot, sum, norm, cross… built directly instead of inlined as functions, each
+    # parsed and transformed at every call (engine.quick_ops: the same operations in the same order)
+    from . import quick_ops
+
+    quick_ops.install()
 
 
 class _QuickWrapper(textwrap.TextWrapper):

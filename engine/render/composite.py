@@ -89,7 +89,9 @@ def _build(uses_add: bool, uses_alpha: bool):
     def pack(c, alpha, bgra):
         """Linear RGB (exposure applied) → ACES → sRGB 8 bits by table, with alpha, as one u32:
         bytes R, G, B, A in memory (``bgra`` 0) or B, G, R, A (windowing systems' order)."""
-        v = ti.sqrt(ti.math.clamp(c, 0.0, LUT_MAX) * (1.0 / LUT_MAX)) * (LUT_SIZE - 1) + 0.5
+        # (ti.math.clamp's own min(max) written out: it is a ti.func, parsed and transformed at
+        # each of pack's ~20 call sites in the composite, at every start)
+        v = ti.sqrt(ti.min(LUT_MAX, ti.max(0.0, c)) * (1.0 / LUT_MAX)) * (LUT_SIZE - 1) + 0.5
         r = ti.cast(lut[ti.cast(v[0], ti.i32)], ti.u32)
         g = ti.cast(lut[ti.cast(v[1], ti.i32)], ti.u32)
         b = ti.cast(lut[ti.cast(v[2], ti.i32)], ti.u32)
