@@ -258,3 +258,35 @@ def test_quick_vector_ops_leave_other_calls_to_taichi():
         wrong()
     assert "rhs for dot is not a vector" in str(e.value)
     runtime.check_thread("test")
+
+
+def test_look_and_force_parameters_written_in_one_launch_each():
+    """The sprites' per-emitter look (engine.render.sprites.Look: ramps, additive, streak, size
+    randomness) and the forces' per-emitter parameters, each written by one kernel: the values
+    ``from_numpy`` of the configs' numbers would give, spare rows zero."""
+    from engine.api import ParticleScene
+    from engine.render.sprites import LOOK_SAMPLES
+
+    data = {"forces": {"turbulence": {"strength": 2.0}}, "emitters": [
+        {"name": "a", "rate": 10.0, "blend": "additive", "streak": 0.02, "size_randomness": 0.3,
+         "color": [[0.0, 1.0, 0.5, 0.25], [1.0, 0.2, 0.3, 0.4]], "alpha": [[0.0, 0.9], [1.0, 0.1]],
+         "size": [[0.0, 0.05]], "gravity_scale": 0.5, "buoyancy": 2.0, "cooling": 3.0},
+        {"name": "b", "rate": 10.0, "blend": "alpha", "size_randomness": 0.7, "gravity_scale": -1.25,
+         "turbulence": 0.8}]}
+    s = ParticleScene.from_dict(data, render=True)
+    look = s.scene.renderer.look
+    assert look.emitter_additive.to_numpy()[:2].tolist() == [1, 0]
+    assert np.array_equal(look.emitter_streak.to_numpy()[:2], np.float32([0.02, 0.0]))
+    assert np.array_equal(look.emitter_size_rand.to_numpy()[:2], np.float32([0.3, 0.7]))
+    table = look.look_table.to_numpy()
+    t = np.linspace(0.0, 1.0, LOOK_SAMPLES + 1)
+    assert np.array_equal(table[0, :, 0], np.interp(t, [0.0, 1.0], [1.0, 0.2]).astype(np.float32))
+    assert np.array_equal(table[0, :, 3], np.interp(t, [0.0, 1.0], [0.9, 0.1]).astype(np.float32))
+    assert np.array_equal(table[0, :, 4], np.float32(np.full(LOOK_SAMPLES + 1, 0.05)))
+    assert not table[2:].any() and not look.emitter_streak.to_numpy()[2:].any()  # spare rows
+    F = s.scene.particles.forces
+    assert np.array_equal(F.emitter_gravity_scale.to_numpy()[:2], np.float32([0.5, -1.25]))
+    assert np.array_equal(F.emitter_buoyancy.to_numpy()[:2], np.float32([2.0, 0.0]))
+    assert np.array_equal(F.emitter_inv_cooling.to_numpy()[:1], np.float32([1.0 / 3.0]))
+    assert np.array_equal(F.emitter_turbulence.to_numpy()[:2], np.float32([1.0, 0.8]))  # (default 1)
+    s.close()

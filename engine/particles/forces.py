@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import taichi as ti
 
+from ..fieldio import ColumnWriter
 from ..forces.fields import attractor_accel, vortex_accel
 from .noise import curl_noise
 
@@ -40,6 +41,7 @@ class Forces:
         if self.use_turbulence:
             self._params["emitter_turbulence"] = ti.field(ti.f32, shape=R)
         self.__dict__.update(self._params)
+        self._writer = ColumnWriter(list(self._params.values()))
         self.set_emitters(emitter_configs)
         if self.attractor_count:
             n = self.attractor_count
@@ -86,10 +88,12 @@ class Forces:
                 "emitter_buoyancy": [e.buoyancy for e in emitter_configs],
                 "emitter_inv_cooling": [1.0 / e.cooling for e in emitter_configs],
                 "emitter_turbulence": [e.turbulence for e in emitter_configs]}
-        for name, fld in self._params.items():
+        arrays = []
+        for name in self._params:
             a = np.zeros(self.rows, np.float32)
             a[: len(emitter_configs)] = cols[name]
-            fld.from_numpy(a)
+            arrays.append(a)
+        self._writer.write(*arrays)  # (one launch for all: engine.fieldio)
 
     @property
     def names(self):
