@@ -54,6 +54,7 @@ import taichi as ti
 
 from .collider_poses import IDENTITY, ShapePoses
 from .collider_projected import ProjectedShapes
+from .fieldio import ColumnWriter
 from .geometry.shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, box_local, quat_normalize, rotate,
                               spun, turn, turned)
 from .ode.events import contact_band
@@ -178,20 +179,29 @@ class Colliders(ShapePoses, ProjectedShapes):
         self._quat = np.zeros((n, 4))
         self._omega = np.zeros((n, 3))
         self._turned = False
+        # the shapes' fixed numbers and first positions: one launch for the float fields (a field
+        # written element by element from Python compiles an accessor each, ~4-12 ms at a start)
+        half, bound, kind = np.zeros((n, 3)), np.zeros(n), np.zeros(n, np.int32)
         for k, s in enumerate(self.specs):
-            self.collider_radius[k] = float(s.radius)
-            self.collider_restitution[k] = float(s.restitution)
-            self.collider_friction[k] = float(s.friction)
             if self.kinds[k] == BOX:
-                self.collider_half[k] = [float(c) for c in s.half_extents]
+                half[k] = [float(c) for c in s.half_extents]
             elif self.kinds[k] == CAPSULE:
-                self.collider_half[k] = [0.0, float(s.half_length), 0.0]
+                half[k] = [0.0, float(s.half_length), 0.0]
             if k >= self.event_count:
-                self.collider_kind[k] = self.kinds[k]
-                self.collider_bound[k] = (float(np.linalg.norm(s.half_extents)) if self.kinds[k] == BOX
-                                          else float(s.half_length) + float(s.radius))
+                kind[k] = self.kinds[k]
+                bound[k] = (float(np.linalg.norm(s.half_extents)) if self.kinds[k] == BOX
+                            else float(s.half_length) + float(s.radius))
             self._pos[k] = s.position_at(0.0)
-        self.collider_point.from_numpy(self._pos)
+        fixed = [(self.collider_point, self._pos)] + [
+            (f, np.array([float(getattr(s, a)) for s in self.specs] or [0.0]))
+            for f, a in ((self.collider_radius, "radius"), (self.collider_restitution, "restitution"),
+                         (self.collider_friction, "friction"))]
+        if hasattr(self, "collider_half"):
+            fixed.append((self.collider_half, half))
+        if self.event_count < self.count:
+            fixed.append((self.collider_bound, bound))
+            self.collider_kind.from_numpy(kind)
+        ColumnWriter([f for f, _ in fixed], dtype).write(*[a for _, a in fixed])
         self._orient_keys = [None] * self.count  # what each shape's row below was made from
         self._orient_rows = np.zeros((max(1, self.count), 12))
         self._write(turned=self._orient([s.orientation_at(0.0) for s in self.specs],

@@ -16,7 +16,8 @@ from taichi.lang.matrix import MatrixField
 
 @ti.data_oriented
 class ColumnWriter:
-    """Writes rows (n, C) into ``fields`` (shape (≥ n,), all of dtype ``dtype``, in order: column
+    """Writes rows (n, C) into ``fields`` (shape (≥ n,), all of dtype ``dtype`` — f32, f64 or i32 —
+    in order: column
     ``offsets[c]`` onward is field c's, ``widths[c]`` columns wide; 0 for a scalar field)."""
 
     def __init__(self, fields, dtype=ti.f32):
@@ -27,7 +28,7 @@ class ColumnWriter:
             offsets.append(at)
             at += max(w, 1)
         self.offsets, self.columns = tuple(offsets), at
-        self._np = np.int32 if dtype == ti.i32 else np.float32
+        self._np = {ti.i32: np.int32, ti.f64: np.float64}.get(dtype, np.float32)
 
     def write(self, *arrays) -> None:
         """One array per field, in order, each (n,) or (n, width), n the same for all; values

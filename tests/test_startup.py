@@ -106,6 +106,10 @@ def test_column_writer_writes_what_from_numpy_writes():
     assert np.array_equal(b.to_numpy(), ref_b.to_numpy())
     assert np.array_equal(c.to_numpy(), vc.astype(np.float32))
     assert np.array_equal(d.to_numpy(), vd.astype(np.int32))
+    e, f = ti.field(ti.f64, shape=7), ti.Vector.field(3, ti.f64, shape=7)  # f64: no rounding to f32
+    ve, vf = rng.normal(size=7) / 3.0, rng.normal(size=(7, 3)) / 3.0
+    ColumnWriter([e, f], ti.f64).write(ve, vf)
+    assert np.array_equal(e.to_numpy(), ve) and np.array_equal(f.to_numpy(), vf)
     w = ColumnWriter([a, b])
     w.zero(4)  # the first 4 rows of each, the rest kept
     assert not a.to_numpy()[:4].any() and not b.to_numpy()[:4].any()
@@ -260,10 +264,10 @@ def test_quick_vector_ops_leave_other_calls_to_taichi():
     runtime.check_thread("test")
 
 
-def test_look_and_force_parameters_written_in_one_launch_each():
+def test_look_force_and_collider_parameters_written_in_one_launch_each():
     """The sprites' per-emitter look (engine.render.sprites.Look: ramps, additive, streak, size
-    randomness) and the forces' per-emitter parameters, each written by one kernel: the values
-    ``from_numpy`` of the configs' numbers would give, spare rows zero."""
+    randomness), the forces' per-emitter parameters and the colliders' fixed numbers, each written
+    by one kernel: the values ``from_numpy`` of the configs' numbers would give, spare rows zero."""
     from engine.api import ParticleScene
     from engine.render.sprites import LOOK_SAMPLES
 
@@ -272,8 +276,15 @@ def test_look_and_force_parameters_written_in_one_launch_each():
          "color": [[0.0, 1.0, 0.5, 0.25], [1.0, 0.2, 0.3, 0.4]], "alpha": [[0.0, 0.9], [1.0, 0.1]],
          "size": [[0.0, 0.05]], "gravity_scale": 0.5, "buoyancy": 2.0, "cooling": 3.0},
         {"name": "b", "rate": 10.0, "blend": "alpha", "size_randomness": 0.7, "gravity_scale": -1.25,
-         "turbulence": 0.8}]}
+         "turbulence": 0.8}],
+        "colliders": [{"type": "plane", "restitution": 0.3, "friction": 0.2},
+                      {"type": "sphere", "center": [1.0, 2.0, 3.0], "radius": 0.5, "restitution": 0.7}]}
     s = ParticleScene.from_dict(data, render=True)
+    C = s.scene.colliders  # (radius, restitution, friction and the first positions: one launch)
+    assert np.array_equal(C.collider_point.to_numpy(), np.float32([[0, 0, 0], [1, 2, 3]]))
+    assert np.array_equal(C.collider_radius.to_numpy(), np.float32([1.0, 0.5]))  # (a plane: the default 1)
+    assert np.array_equal(C.collider_restitution.to_numpy(), np.float32([0.3, 0.7]))
+    assert C.collider_friction.to_numpy()[0] == np.float32(0.2)
     look = s.scene.renderer.look
     assert look.emitter_additive.to_numpy()[:2].tolist() == [1, 0]
     assert np.array_equal(look.emitter_streak.to_numpy()[:2], np.float32([0.02, 0.0]))
