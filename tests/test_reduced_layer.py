@@ -324,3 +324,51 @@ def test_a_reduced_tile_mixes_in_the_coarse_level_only_where_it_drew_under_it(sc
         other = other_schedule(s.scene, "tiles").render(s.scene.camera, 640, 360)
         assert np.abs(other.astype(int) - img.astype(int)).max() <= 1
     s.close()
+
+
+@pytest.mark.parametrize("schedule", ["tiles", "pixels"])
+def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
+    """A frame whose sprites are all at full resolution (sparks, galaxy) neither interpolates the
+    reduced layer's rows nor reads that layer in the composite (``tally`` counts the reduced and
+    coarse levels' pairs): the same image as the path that does both, which a frame with one big
+    sprite still takes."""
+    s = ParticleScene.from_dict({
+        "name": "dots", "fps": 60, "frames": 60,
+        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
+        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
+        "emitters": [{"name": "dots", "position": [0.0, 1.0, 0.0], "speed": [0.5, 1.0],
+                      "bursts": [{"time": 0.0, "count": 60}], "lifetime": 5.0, "blend": "additive",
+                      "size": [[0.0, 0.01]], "alpha": [[0.0, 0.8]]},
+                     {"name": "puff", "position": [0.0, 1.0, 0.0], "start": 0.5,
+                      "bursts": [{"time": 0.5, "count": 1}], "lifetime": 5.0, "blend": "alpha",
+                      "size": [[0.0, 0.6]], "alpha": [[0.0, 0.5]]}]})
+    if schedule == "pixels":
+        s.scene.renderer = other_schedule(s.scene, "pixels")
+    R = s.scene.renderer
+    calls = []
+    lo_rows = R._k["lo_rows"]
+    R._k = dict(R._k, lo_rows=lambda *a: (calls.append(1), lo_rows(*a)))  # (this renderer's only)
+    splat = R._splat
+
+    def always_reduced(t, *a, **k):  # the path before: the reduced layer read whenever it exists
+        splat(t, *a, **k)
+        return int(t.has_lo)
+
+    for _ in range(6):
+        s.step(1 / 60)
+    skipped = s.render().copy()
+    assert _levels(s) == {0} and not calls and skipped.any() and R.last_reduced_pairs == 0
+    R._splat = always_reduced
+    assert np.array_equal(s.render(), skipped) and len(calls) == 1
+    del R._splat
+    for _ in range(30):  # the puff is born at 0.5 s: the reduced layer is read again
+        s.step(1 / 60)
+    drawn = s.render().copy()
+    assert _levels(s) & {1, 2} and len(calls) == 2
+    info, tiles = R.records.spr_info.to_numpy(), R.records.spr_tiles.to_numpy()
+    on = (info[:, 0] != 0) & (info[:, 2] >= 1)  # the tile-sprite pairs of levels 1 and 2
+    want = int(((tiles[on, 2] - tiles[on, 0] + 1) * (tiles[on, 3] - tiles[on, 1] + 1)).sum())
+    assert R.last_reduced_pairs == want >= 1 and R.last_pairs > want
+    R._splat = always_reduced
+    assert np.array_equal(s.render(), drawn)
+    s.close()

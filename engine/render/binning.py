@@ -56,10 +56,10 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
               tile_count: ti.types.ndarray(dtype=ti.i32, ndim=1),
               tile_start: ti.types.ndarray(dtype=ti.i32, ndim=1),
               block_sum: ti.types.ndarray(dtype=ti.i32, ndim=1), T: ti.i32, T0: ti.i32, T1: ti.i32,
-              TX0: ti.i32, TX1: ti.i32, TX2: ti.i32, NB: ti.i32) -> ti.i32:
+              TX0: ti.i32, TX1: ti.i32, TX2: ti.i32, NB: ti.i32) -> ti.types.vector(2, ti.i32):
         """Steps 1–3 in one launch (a kernel's top-level loops run one after another, each a
         parallel pass: a launch costs ~0.1 ms here, more than a step's work); returns the number
-        of tile–sprite pairs."""
+        of tile–sprite pairs and how many of them are in the reduced and coarse levels' tiles."""
         # 1. count
         ti.loop_config(block_dim=1)  # one chunk per task
         for c in range(chunks):
@@ -95,7 +95,10 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
         total = 0
         for b in range(NB):
             total += block_sum[b]
-        return total
+        reduced = 0  # (the levels' tiles are consecutive: 0, then 1 and 2 from T0 on)
+        if T0 < T:
+            reduced = total - tile_start[T0]
+        return ti.Vector([total, reduced])
 
     @ti.kernel
     def scatter(pairs: ti.types.ndarray(dtype=vec16, ndim=1),

@@ -98,7 +98,7 @@ class Renderer:
 
             self.mesh = MeshLayer(bodies)
         self._targets = OrderedDict()  # (W, H, layer scale) -> FrameTargets, most recent last
-        self.last_pairs = 0
+        self.last_pairs = self.last_reduced_pairs = 0  # (tile-sprite pairs; those of levels 1 and 2)
 
     # -- per-size arrays ------------------------------------------------------------------------
     def targets(self, width: int, height: int) -> FrameTargets:
@@ -222,11 +222,12 @@ class Renderer:
         lo_min = LO_MIN_TEXELS / t.scale if t.has_lo else 1e30
         co_min = CO_MIN_TEXELS / (0.5 * t.scale) if t.has_lo else 1e30
         self._sprites(*cam, W, H, t.scale, lo_min, co_min, float(blend))
-        total = int(self._tally(t.hist, t.tile_count, t.tile_start, t.block_sum, t.T, t.T0, t.T1, t.TX,
-                                t.TXl, t.TXc, t.NB))
+        counts = self._tally(t.hist, t.tile_count, t.tile_start, t.block_sum, t.T, t.T0, t.T1, t.TX,
+                             t.TXl, t.TXc, t.NB)
+        total, reduced = int(counts[0]), int(counts[1])
         if total > t.pair_capacity:  # an ndarray: growing it recompiles nothing
             t.grow_pairs(int(total * 1.25) + 1024)
-        self.last_pairs = total
+        self.last_pairs, self.last_reduced_pairs = total, reduced
         if total == 0 and t.lo_clear:
             # nothing to draw, and no reduced tile was drawn at these targets' last splat (each
             # ``touched_lo`` is 0): every tile count is 0, so no accumulator is read — no
@@ -244,4 +245,7 @@ class Renderer:
                                        self.shading)
         # (every splat sets each touched_lo and touched_co to whether its tile was drawn)
         t.lo_clear = total == 0
-        return int(t.has_lo)
+        # no sprite in the reduced or coarse level this frame (sparks, galaxy: small sprites only):
+        # every reduced tile was just splatted empty, so the composite need not read that layer and
+        # its rows need not be interpolated (the empty layer over the background is the background)
+        return int(t.has_lo and reduced > 0)
