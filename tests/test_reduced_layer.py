@@ -263,7 +263,7 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
     def composite(row_empty_value):
         out = np.zeros(px, np.uint32)
         edges = nd(ti.i32, np.full(TX * TY, -1, np.int32))
-        k["composite_tiles"](np.zeros(TX * TY, np.int32), acc, acc, rows,
+        k["composite_tiles"](np.zeros(TX * TY, np.int32), np.zeros(TX * TY, np.int32), acc, acc, rows,
                              np.full(Hl * TX, row_empty_value, np.int32), nd(v4, frame_bg),
                              nd(ti.f32, np.ones(LO + Wl * Hl, np.float32)), packed, out,
                              np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,

@@ -176,7 +176,7 @@ def _build(uses_add: bool, uses_alpha: bool):
                 out[k] = bg_pixel(bg_packed, k)
 
     @ti.kernel
-    def composite_tiles(tile_count: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, row_empty: ND_I1,
+    def composite_tiles(tile_count: ND_I1, full_rows: ND_I1, accA: ND_V4, accB: ND_V4, rows: ND_V4, row_empty: ND_I1,
                         bgc: ND_V4, dep: ND_F,
                         bg_packed: ND_U64, out: ND_U32, out64: ND_U64, copy: ti.i32, dirty: ND_I1,
                         dirty_prev: ND_I1,
@@ -199,7 +199,11 @@ def _build(uses_add: bool, uses_alpha: bool):
 
         ``row_empty`` (Hl·TX,): per reduced row and tile column, whether the reduced layer is
         empty there (``upsample.lo_rows``); a tile row under only the reduced layer whose two rows
-        are both empty shows the packed background."""
+        are both empty shows the packed background. ``full_rows`` (TX·TY,): per tile with sprites,
+        the mask of the rows they may have drawn in (``splat_tiles``); a row outside it is the
+        empty full layer (0, 0, 0, 1) exactly, so it is composited as a row of a tile without
+        sprites is: the reduced layer alone, or, with neither and no body drawn in the tile, the
+        packed background (40 % of such rows in sparks at 1280×720, 75 % in explosion)."""
         ti.loop_config(block_dim=1)
         for t in range(TX * TY):
             tx, ty = t % TX, t // TX
@@ -220,6 +224,9 @@ def _build(uses_add: bool, uses_alpha: bool):
                     for y in range(py0, py1 + 1):
                         background_row(bg_packed, out, out64, copy, y, px0, px1, W)
             else:
+                drawn = 0  # the rows of this tile its own sprites may have drawn in
+                if n > 0:
+                    drawn = full_rows[t]
                 edge = 0
                 if near != 0:
                     edge = edges[t]
@@ -239,7 +246,8 @@ def _build(uses_add: bool, uses_alpha: bool):
                     mask = 0
                     if edge != 0:
                         mask = edge_rows[t * TILE + y - py0]
-                    if n == 0 and near != 0 and mask == 0:
+                    full_here = (drawn >> (y - py0)) & 1
+                    if full_here == 0 and near != 0 and mask == 0:
                         # the common case under smoke: the reduced layer alone, bilinear
                         if (dirty[t] == 0 and row_empty[ja * TX + tx] != 0
                                 and row_empty[jb * TX + tx] != 0):
@@ -258,11 +266,13 @@ def _build(uses_add: bool, uses_alpha: bool):
                                 low = (1.0 - fy) * rows[ra + x] + fy * rows[rb + x]
                                 out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
                                                         mode)
+                    elif full_here == 0 and near == 0 and dirty[t] == 0:
+                        background_row(bg_packed, out, out64, copy, y, px0, px1, W)
                     else:
                         for x in range(px0, px1 + 1):
                             k = y * W + x
                             full = EMPTY_LAYER
-                            if n > 0:
+                            if full_here != 0:
                                 full = acc_layer(accA, accB, ab + y * aw + x, shading)
                             low = EMPTY_LAYER
                             if near != 0:

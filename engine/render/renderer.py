@@ -199,7 +199,7 @@ class Renderer:
             if rect is not None:
                 ex0, ey0 = rect[0] // TILE - 1, rect[1] // TILE - 1
                 ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
-            self._k["composite_tiles"](t.tile_count, t.accA, t.accB, t.lo_rows, t.lo_row_empty, bgc, dep, t.bg_packed,
+            self._k["composite_tiles"](t.tile_count, t.full_rows, t.accA, t.accB, t.lo_rows, t.lo_row_empty, bgc, dep, t.bg_packed,
                                        packed, *untouched_tiles(t, image, packed), t.dirty, t.dirty_prev if t.mesh else t.dirty,
                                        t.touched_lo, t.edges, t.edge_rows, ex0, ey0, ex1, ey1, *common)
         else:
@@ -211,7 +211,7 @@ class Renderer:
         """The per-tile splat of the tiles [t_lo, t_hi) (engine.render.composite.splat_tiles)."""
         if t_hi > t_lo:
             self._k["splat_tiles"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_lo,
-                                   t.touched_co, t_lo, t_hi, t.T0, t.TX, t.W, t.H, t.T1, t.TXl, t.Wl, t.Hl,
+                                   t.touched_co, t.full_rows, t_lo, t_hi, t.T0, t.TX, t.W, t.H, t.T1, t.TXl, t.Wl, t.Hl,
                                    t.TXc, t.Wc, t.Hc, self.shading)
 
     def _splat(self, t: FrameTargets, cam, dep, blend: float = 1.0) -> int:

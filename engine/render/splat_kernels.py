@@ -19,6 +19,12 @@ from .sprites import TILE
 from .upsample import ND_F, ND_I1, ND_V4, co_mix, co_quad, footprint, is_empty_layer, lo_near
 
 EMPTY_LAYER = ti.Vector([0.0, 0.0, 0.0, 1.0])  # a layer that draws nothing: RGB 0, T 1
+
+
+@ti.func
+def row_mask(y0, y1, py0):
+    """Bits y0 − py0 … y1 − py0 set (rows y0..y1 of a tile whose first row is py0; y0 ≤ y1)."""
+    return ((1 << (y1 - py0 + 1)) - 1) ^ ((1 << (y0 - py0)) - 1)
 ND_PAIRS = ti.types.ndarray(dtype=vec16, ndim=1)  # the binned records, one per (tile, sprite)
 
 
@@ -37,7 +43,9 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
     def deposit(px0, py0, px1, py1, rec, accA: ti.template(), accB: ti.template(),
                 dep: ti.template(), base, W, ab, aw):
         """A record onto the pixels of [px0, px1] × [py0, py1] it covers (depths at
-        base + y·W + x, accumulators at ab + y·aw + x: ``tile_rows``)."""
+        base + y·W + x, accumulators at ab + y·aw + x: ``tile_rows``); returns a mask of the tile's
+        rows it may have drawn in (bit y − py0: every row of its box in the tile, a superset)."""
+        rows = 0
         cx, cy, rad = rec[0], rec[1], rec[2]
         inv_r2 = 1.0 / (rad * rad)
         col = ti.Vector([rec[4], rec[5], rec[6]])
@@ -46,6 +54,8 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
             tx, ty = rec[9], rec[10]
             y0 = ti.max(py0, ti.cast(ti.floor(ti.min(cy, ty) - rad), ti.i32))
             y1 = ti.min(py1, ti.cast(ti.floor(ti.max(cy, ty) + rad), ti.i32))
+            if y0 <= y1:
+                rows = row_mask(y0, y1, py0)
             for yy in range(y0, y1 + 1):
                 # the part of the segment within rad of this row, widened by rad
                 lo_t, hi_t = 0.0, 1.0
@@ -67,6 +77,7 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
             y0 = ti.max(py0, ti.cast(ti.floor(cy - rad), ti.i32))
             y1 = ti.min(py1, ti.cast(ti.floor(cy + rad), ti.i32))
             if x0 <= x1 and y0 <= y1:
+                rows = row_mask(y0, y1, py0)
                 a, energy = rec[7], rec[8]
                 span = ti.max(x1 - x0, y1 - y0)
                 if span < 2:
@@ -82,6 +93,7 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                                         ti.min(x1, ti.cast(ti.floor(cx + half), ti.i32)) + 1):
                             pixel(xx, yy, True, cx, cy, inv_r2, rec, col, a, is_add, energy, accA,
                                   accB, dep, base, W, ab, aw)
+        return rows
 
     @ti.func
     def block(Bn: ti.template(), bx, by, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy,
@@ -130,14 +142,17 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
     def splat_tile(t, px0, py0, px1, py1, pairs: ti.template(), tile_count: ti.template(),
                    tile_start: ti.template(), accA: ti.template(), accB: ti.template(),
                    dep: ti.template(), base, W, ab, aw):
-        """Clear a tile's accumulators and add its sprites, in slot order (per-tile schedule)."""
+        """Clear a tile's accumulators and add its sprites, in slot order (per-tile schedule);
+        returns the mask of the rows they may have drawn in (``deposit``)."""
         for y in range(py0, py1 + 1):
             for x in range(ab + y * aw + px0, ab + y * aw + px1 + 1):
                 accA[x] = EMPTY_LAYER
                 if ti.static(uses_alpha):
                     accB[x] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        rows = 0
         for j in range(tile_start[t], tile_start[t] + tile_count[t]):
-            deposit(px0, py0, px1, py1, pairs[j], accA, accB, dep, base, W, ab, aw)
+            rows |= deposit(px0, py0, px1, py1, pairs[j], accA, accB, dep, base, W, ab, aw)
+        return rows
 
     @ti.func
     def splat_pixel(t, px, py, pairs: ti.template(), tile_count: ti.template(),
@@ -194,11 +209,14 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
 
     @ti.kernel
     def splat_tiles(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4, accB: ND_V4,
-                    dep: ND_F, touched_lo: ND_I1, touched_co: ND_I1, t_lo: ti.i32, t_hi: ti.i32,
+                    dep: ND_F, touched_lo: ND_I1, touched_co: ND_I1, full_rows: ND_I1, t_lo: ti.i32,
+                    t_hi: ti.i32,
                     T0: ti.i32, TX: ti.i32, W: ti.i32, H: ti.i32, T1: ti.i32, TXl: ti.i32, Wl: ti.i32,
                     Hl: ti.i32, TXc: ti.i32, Wc: ti.i32, Hc: ti.i32, shading: ti.f32):
         """Per tile (the CPU's schedule), the tiles [t_lo, t_hi) of the index space (full level,
-        then reduced, then coarse): clear and splat the tile's sprites into the accumulators. The
+        then reduced, then coarse): clear and splat the tile's sprites into the accumulators (and
+        keep a full-level tile's mask of the rows they may have drawn in, ``full_rows``, for the
+        composite). The
         renderer launches the coarse tiles first, then the others: a reduced-level tile then
         adds the coarse level's sums under it (``with_coarse``) and resolves each texel to its
         layer (RGB, T) in place. A reduced or coarse tile emptied since the last frame is reset
@@ -219,8 +237,10 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                 ab, aw = base, Wk  # the reduced and coarse levels' accumulators: row-major
                 if lvl == 0:
                     ab, aw = tile_rows(px0, py0, px1, py1, W)
-                splat_tile(t, px0, py0, px1, py1, pairs, tile_count, tile_start, accA, accB, dep, base, Wk,
-                           ab, aw)
+                rows = splat_tile(t, px0, py0, px1, py1, pairs, tile_count, tile_start, accA, accB, dep,
+                                  base, Wk, ab, aw)
+                if lvl == 0:
+                    full_rows[t] = rows
             if lvl == 2:
                 if n == 0 and touched_co[tt] != 0:
                     for y in range(py0, py1 + 1):

@@ -78,6 +78,8 @@ class FrameTargets:
         self.touched_lo.fill(0)
         self.touched_co = ti.ndarray(ti.i32, shape=max(1, self.T2))
         self.touched_co.fill(0)
+        # per full-level tile: the rows its sprites may have drawn in (a mask; splat_tiles)
+        self.full_rows = ti.ndarray(ti.i32, shape=max(1, self.T0))
         # every touched_lo and touched_co is 0 (the renderer's empty frames skip the splat)
         self.lo_clear = True
         self.hist = ti.ndarray(ti.i32, shape=(chunks, self.T))
