@@ -87,6 +87,18 @@ def test_auto_resolution_follows_the_image_height():
     assert particle_scale(0.5, 4000) == 0.5 and particle_scale(1, 4000) == 1.0
 
 
+def _small_scene(schedule, emitters):
+    """A 320×180 scene of these emitters seen from 4 m, its reduced layer at ¼, drawn with this
+    schedule ("tiles" or "pixels")."""
+    s = ParticleScene.from_dict({
+        "name": "small", "fps": 60, "frames": 60,
+        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
+        "render": {"width": 320, "height": 180, "particle_resolution": 0.25}, "emitters": emitters})
+    if schedule == "pixels":
+        s.scene.renderer = other_schedule(s.scene, "pixels")
+    return s
+
+
 def _levels(s):
     """The levels (0 full, 1 reduced, 2 coarse) of the sprites the scene's last frame drew."""
     info = s.scene.renderer.records.spr_info.to_numpy()
@@ -101,15 +113,9 @@ def test_once_every_particle_is_gone_the_frame_is_the_background_again(schedule,
     drawn from the last one: the first empty frame after smoke in the reduced layer (0.6 m puffs,
     16 px) or the coarse one (2 m puffs, 54 px) resets it, and it and every later one equal the
     background alone (the frame before anything was born)."""
-    s = ParticleScene.from_dict({
-        "name": "puff", "fps": 60, "frames": 60,
-        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
-        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
-        "emitters": [{"name": "puff", "position": [0.0, 1.0, 0.0], "speed": [0.0, 0.2],
-                      "bursts": [{"time": 0.0, "count": 40}], "lifetime": 0.2, "blend": "alpha",
-                      "size": [[0.0, size]], "alpha": [[0.0, 0.8]]}]})
-    if schedule == "pixels":
-        s.scene.renderer = other_schedule(s.scene, "pixels")
+    s = _small_scene(schedule, [{"name": "puff", "position": [0.0, 1.0, 0.0], "speed": [0.0, 0.2],
+                                 "bursts": [{"time": 0.0, "count": 40}], "lifetime": 0.2, "blend": "alpha",
+                                 "size": [[0.0, size]], "alpha": [[0.0, 0.8]]}])
     background = s.render().copy()
     s.step(1 / 60)
     drawn = s.render().copy()
@@ -332,18 +338,12 @@ def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
     reduced layer's rows nor reads that layer in the composite (``tally`` counts the reduced and
     coarse levels' pairs): the same image as the path that does both, which a frame with one big
     sprite still takes."""
-    s = ParticleScene.from_dict({
-        "name": "dots", "fps": 60, "frames": 60,
-        "camera": {"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
-        "render": {"width": 320, "height": 180, "particle_resolution": 0.25},
-        "emitters": [{"name": "dots", "position": [0.0, 1.0, 0.0], "speed": [0.5, 1.0],
-                      "bursts": [{"time": 0.0, "count": 60}], "lifetime": 5.0, "blend": "additive",
-                      "size": [[0.0, 0.01]], "alpha": [[0.0, 0.8]]},
-                     {"name": "puff", "position": [0.0, 1.0, 0.0], "start": 0.5,
-                      "bursts": [{"time": 0.5, "count": 1}], "lifetime": 5.0, "blend": "alpha",
-                      "size": [[0.0, 0.6]], "alpha": [[0.0, 0.5]]}]})
-    if schedule == "pixels":
-        s.scene.renderer = other_schedule(s.scene, "pixels")
+    s = _small_scene(schedule, [
+        {"name": "dots", "position": [0.0, 1.0, 0.0], "speed": [0.5, 1.0],
+         "bursts": [{"time": 0.0, "count": 60}], "lifetime": 5.0, "blend": "additive",
+         "size": [[0.0, 0.01]], "alpha": [[0.0, 0.8]]},
+        {"name": "puff", "position": [0.0, 1.0, 0.0], "start": 0.5, "bursts": [{"time": 0.5, "count": 1}],
+         "lifetime": 5.0, "blend": "alpha", "size": [[0.0, 0.6]], "alpha": [[0.0, 0.5]]}])
     R = s.scene.renderer
     calls = []
     lo_rows = R._k["lo_rows"]
