@@ -6,16 +6,18 @@ from source and its AST transformed again where it is inlined — ``dot`` inline
 inlines ``_reduce`` — on every start, also when the kernel then comes from the offline cache.
 The front end's cost is per node transformed: sparks' located step calls them ~250 times (77
 ``sum``s), a third of its front-end time. Each replacement below builds the same operations in
-the same order, as those functions' bodies do: the arguments copied into locals (as an inlined
-function takes them, by value), then the products and the left-to-right sum (``_reduce``), the
-square root, the cross product's three differences, ``1 / (norm + eps) * v``. No function is
-inlined, so none is parsed or transformed.
+the same order, as those functions' bodies do, with the same local copies: each argument copied
+(an inlined function takes it by value) and each assignment through a temporary, then the
+products and the left-to-right sum (``_reduce``), the square root, the cross product's three
+differences, ``1 / (norm + eps) * v``. (The copies matter: a first version without them moved
+campfire's particles by an ulp after a few steps; LLVM's fast-math code depends on the shape of
+what it is given.) No function is inlined, so none is parsed or transformed.
 
 Any call these do not cover (Python scope, a matrix rather than a vector where a vector is
 wanted, shapes that do not match, a non-tensor argument) goes to Taichi's own function, which
 computes it or raises its own error. Frames are byte-identical with and without them
 (tests/test_startup.py; the configs' frames hashed both ways), though the kernels' offline-cache
-keys change once (the front end's IR has fewer temporaries).
+keys change once (the front end's IR has no function scopes for them).
 """
 from __future__ import annotations
 
