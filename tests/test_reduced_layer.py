@@ -372,3 +372,39 @@ def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
     R._splat = always_reduced
     assert np.array_equal(s.render(), drawn)
     s.close()
+
+
+@pytest.mark.parametrize("config", ["configs/sparks.toml", "configs/explosion.toml", "dots"])
+def test_full_rows_mark_every_row_a_sprite_drew_in(config):
+    """``splat_tiles``' mask per full-level tile (``full_rows``, what the composite takes as the
+    rows its sprites drew in) holds every row whose accumulators are not the empty layer — the
+    streaks' and discs' rows down to a one-pixel span — and leaves some rows out (else it would
+    save nothing)."""
+    if config == "dots":  # sprites of 1-3 px (the splat's unrolled 2x2 block)
+        api = _small_scene("tiles", [{"name": "dots", "position": [0.0, 1.0, 0.0], "speed": [0.5, 1.5],
+                                      "bursts": [{"time": 0.0, "count": 400}], "lifetime": 5.0,
+                                      "blend": "additive", "size": [[0.0, 0.004]], "alpha": [[0.0, 0.9]]}])
+        for _ in range(20):
+            api.step(1 / 60)
+        s = api.scene
+    else:
+        s = drawn_scene(config, frames=30, size=(320, 180))
+    s.render()
+    t = s.renderer.targets(320, 180)
+    A = t.accA.to_numpy()
+    B = t.accB.to_numpy() if s.renderer.uses_alpha else np.zeros_like(A)
+    counts, masks = t.tile_count.to_numpy()[:t.T0], t.full_rows.to_numpy()
+    marked = unmarked = 0
+    for k in np.flatnonzero(counts > 0):
+        px0, py0 = (k % t.TX) * 16, (k // t.TX) * 16
+        px1, py1 = min(t.W - 1, px0 + 15), min(t.H - 1, py0 + 15)
+        tw, th = px1 - px0 + 1, py1 - py0 + 1
+        ab = py0 * t.W + px0 * th - py0 * tw - px0  # (splat_kernels.tile_rows)
+        for y in range(py0, py1 + 1):
+            idx = ab + y * tw + np.arange(px0, px1 + 1)
+            drawn = (A[idx] != (0.0, 0.0, 0.0, 1.0)).any() or (B[idx] != 0.0).any()
+            bit = (int(masks[k]) >> (y - py0)) & 1
+            assert bit or not drawn, (k, y)
+            marked += bit
+            unmarked += 1 - bit
+    assert marked > 0 and unmarked > 0

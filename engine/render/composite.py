@@ -203,7 +203,7 @@ def _build(uses_add: bool, uses_alpha: bool):
         the mask of the rows they may have drawn in (``splat_tiles``); a row outside it is the
         empty full layer (0, 0, 0, 1) exactly, so it is composited as a row of a tile without
         sprites is: the reduced layer alone, or, with neither and no body drawn in the tile, the
-        packed background (40 % of such rows in sparks at 1280×720, 75 % in explosion)."""
+        packed background (33 % of those tiles' rows in sparks at 1280×720, 61 % in explosion)."""
         ti.loop_config(block_dim=1)
         for t in range(TX * TY):
             tx, ty = t % TX, t // TX

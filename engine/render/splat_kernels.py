@@ -44,7 +44,8 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                 dep: ti.template(), base, W, ab, aw):
         """A record onto the pixels of [px0, px1] × [py0, py1] it covers (depths at
         base + y·W + x, accumulators at ab + y·aw + x: ``tile_rows``); returns a mask of the tile's
-        rows it may have drawn in (bit y − py0: every row of its box in the tile, a superset)."""
+        rows it may have drawn in (bit y − py0: each row whose span of the disc or capsule reaches
+        into the tile; for a 1–3 px sprite, its box's rows)."""
         rows = 0
         cx, cy, rad = rec[0], rec[1], rec[2]
         inv_r2 = 1.0 / (rad * rad)
@@ -54,8 +55,6 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
             tx, ty = rec[9], rec[10]
             y0 = ti.max(py0, ti.cast(ti.floor(ti.min(cy, ty) - rad), ti.i32))
             y1 = ti.min(py1, ti.cast(ti.floor(ti.max(cy, ty) + rad), ti.i32))
-            if y0 <= y1:
-                rows = row_mask(y0, y1, py0)
             for yy in range(y0, y1 + 1):
                 # the part of the segment within rad of this row, widened by rad
                 lo_t, hi_t = 0.0, 1.0
@@ -67,6 +66,7 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                 xa, xb = cx + lo_t * (tx - cx), cx + hi_t * (tx - cx)
                 x0 = ti.max(px0, ti.cast(ti.floor(ti.min(xa, xb) - rad), ti.i32))
                 x1 = ti.min(px1, ti.cast(ti.floor(ti.max(xa, xb) + rad), ti.i32))
+                rows |= ti.select(x0 <= x1, 1 << (yy - py0), 0)  # (a row its span reaches)
                 for xx in range(x0, x1 + 1):
                     qx, qy, fade = capsule_point(xx, yy, rec)
                     pixel(xx, yy, True, qx, qy, inv_r2, rec, col, rec[7] * fade, is_add, rec[8],
@@ -77,10 +77,10 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
             y0 = ti.max(py0, ti.cast(ti.floor(cy - rad), ti.i32))
             y1 = ti.min(py1, ti.cast(ti.floor(cy + rad), ti.i32))
             if x0 <= x1 and y0 <= y1:
-                rows = row_mask(y0, y1, py0)
                 a, energy = rec[7], rec[8]
                 span = ti.max(x1 - x0, y1 - y0)
                 if span < 2:
+                    rows = row_mask(y0, y1, py0)
                     block(2, x0, y0, x1, y1, cx, cy, inv_r2, rec, col, a, is_add, energy, accA, accB,
                           dep, base, W, ab, aw)
                 else:  # one inlined pixel in a loop keeps the kernel (and its build) small: a 4×4
@@ -89,8 +89,10 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                         # only the row's span inside the circle (a box wastes 1 − π/4 of its pixels)
                         dy = yy + 0.5 - cy
                         half = ti.sqrt(ti.max(0.0, rad * rad - dy * dy))
-                        for xx in range(ti.max(x0, ti.cast(ti.floor(cx - half), ti.i32)),
-                                        ti.min(x1, ti.cast(ti.floor(cx + half), ti.i32)) + 1):
+                        xs0 = ti.max(x0, ti.cast(ti.floor(cx - half), ti.i32))
+                        xs1 = ti.min(x1, ti.cast(ti.floor(cx + half), ti.i32))
+                        rows |= ti.select(xs0 <= xs1, 1 << (yy - py0), 0)
+                        for xx in range(xs0, xs1 + 1):
                             pixel(xx, yy, True, cx, cy, inv_r2, rec, col, a, is_add, energy, accA,
                                   accB, dep, base, W, ab, aw)
         return rows
