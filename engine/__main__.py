@@ -1,5 +1,5 @@
 import sys
 
-from particles_tools.main import main
+from particles_tools.main import console
 
-sys.exit(main())
+sys.exit(console())

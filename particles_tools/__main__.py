@@ -1,6 +1,6 @@
 """``python -m particles_tools``: the ``particles`` command."""
 import sys
 
-from .main import main
+from .main import console
 
-sys.exit(main())
+sys.exit(console())
