@@ -301,3 +301,77 @@ def test_look_force_and_collider_parameters_written_in_one_launch_each():
     assert np.array_equal(F.emitter_inv_cooling.to_numpy()[:1], np.float32([1.0 / 3.0]))
     assert np.array_equal(F.emitter_turbulence.to_numpy()[:2], np.float32([1.0, 0.8]))  # (default 1)
     s.close()
+
+
+def test_writer_group_writes_every_writer_in_one_kernel():
+    """engine.fieldio.WriterGroup: writes held in a block land together, each writer's rows as
+    ``from_numpy`` would write them (f32, i32 and f64, scalar and vector fields); a write outside a
+    block writes that writer's rows alone; a block that raises writes nothing; the group's writers
+    are fixed once its kernel is built."""
+    from engine.fieldio import ColumnWriter, WriterGroup
+
+    rng = np.random.default_rng(5)
+    a, b = ti.field(ti.f32, shape=6), ti.Vector.field(3, ti.f32, shape=6)
+    c, d = ti.field(ti.i32, shape=6), ti.Vector.field(2, ti.f64, shape=6)
+    e = ti.field(ti.f32, shape=6)
+    g = WriterGroup()
+    wab, wc = ColumnWriter([a, b], group=g), ColumnWriter([c], ti.i32, g)
+    wd, we = ColumnWriter([d], ti.f64, g), ColumnWriter([e], group=g)
+    va, vb = rng.normal(size=4), rng.normal(size=(4, 3))
+    vc, vd, ve = rng.integers(-9, 9, size=5), rng.normal(size=(6, 2)) / 3.0, rng.normal(size=6)
+    with g.held():
+        wab.write(va, vb)
+        wc.write(vc)
+        wd.write(vd)
+        we.write(ve)
+        assert not a.to_numpy().any() and not d.to_numpy().any()  # held: nothing written yet
+    assert np.array_equal(a.to_numpy()[:4], va.astype(np.float32)) and not a.to_numpy()[4:].any()
+    assert np.array_equal(b.to_numpy()[:4], vb.astype(np.float32))
+    assert np.array_equal(c.to_numpy()[:5], vc.astype(np.int32))
+    assert np.array_equal(d.to_numpy(), vd)  # f64: no rounding through f32
+    assert np.array_equal(e.to_numpy(), ve.astype(np.float32))
+    wc.zero(2)  # outside a block: that writer's rows alone
+    assert c.to_numpy()[:2].tolist() == [0, 0] and np.array_equal(c.to_numpy()[2:5], vc[2:].astype(np.int32))
+    assert np.array_equal(a.to_numpy()[:4], va.astype(np.float32))
+    with pytest.raises(ZeroDivisionError):
+        with g.held():
+            we.zero(6)
+            1 / 0
+    assert np.array_equal(e.to_numpy(), ve.astype(np.float32))  # the block raised: nothing written
+    with pytest.raises(RuntimeError, match="after the group's kernel"):
+        ColumnWriter([ti.field(ti.f32, shape=2)], group=g)
+
+
+def test_particle_parameters_and_counters_in_one_launch():
+    """A particle system's emitter parameters (f32 and i32), counters and force parameters are
+    written by one launch of one kernel at the build, and again when emitters are added."""
+    from engine import fieldio
+    from engine.api import ParticleScene
+    from engine.config import load_config
+    from engine.scene import Scene
+    from helpers import scene_dict
+
+    launches = []
+    real = fieldio._write_groups
+
+    def counted(*args):
+        launches.append(args[0])
+        return real(*args)
+
+    data = {"emitters": [{"name": "a", "rate": 10.0, "shape": "sphere", "radius": 0.25, "gravity_scale": 0.5}]}
+    fieldio._write_groups = counted
+    try:
+        Scene(load_config(scene_dict(emitters=data["emitters"])), render=False)  # the build: one launch
+        assert len(launches) == 1 and len(launches[0].writers) == 4
+        launches.clear()
+        s = ParticleScene.from_dict(data, render=False, spare_emitters=1)  # (builds, then resets)
+        assert len(launches) == 2 and launches[1] is launches[0]
+        P = s.scene.particles
+        assert P.emitters.emitter_radius.to_numpy()[0] == np.float32(0.25)
+        assert P.forces.emitter_gravity_scale.to_numpy()[0] == np.float32(0.5)
+        s.add_emitter({"name": "b", "rate": 5.0, "gravity_scale": -2.0})
+        assert len(launches) == 3 and launches[2] is launches[0]
+        assert P.forces.emitter_gravity_scale.to_numpy()[:2].tolist() == [0.5, -2.0]
+        s.close()
+    finally:
+        fieldio._write_groups = real

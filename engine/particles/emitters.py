@@ -14,7 +14,7 @@ from typing import List
 import numpy as np
 import taichi as ti
 
-from ..fieldio import ColumnWriter
+from ..fieldio import ColumnWriter, WriterGroup
 from . import local_space as _local
 from . import spawn as _k
 from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
@@ -62,9 +62,11 @@ class Emitters:
     ring heads and serial counters (fields, so kernels and Python share one truth) and the
     clocks; ``inputs``: the control's emitter inputs."""
 
-    def __init__(self, configs, layout, seed: int, inputs, state, rows: int = 0):
+    def __init__(self, configs, layout, seed: int, inputs, state, rows: int = 0, writes=None):
         """``rows``: parameter rows to allocate (at least one per emitter): spare rows let
-        emitters be added later (:meth:`set_configs`) without new fields or compiles."""
+        emitters be added later (:meth:`set_configs`) without new fields or compiles.
+        ``writes``: the :class:`~engine.fieldio.WriterGroup` that writes the parameters and
+        counters (the system's, shared with its forces: one kernel), else this object's own."""
         self.layout, self.seed, self.inputs, self.state = layout, int(seed), inputs, state
         self.count = R = max(len(configs), int(rows))  # rows: a compile-time bound of the spawn kernel
         self._params = {}
@@ -74,21 +76,23 @@ class Emitters:
             fld = ti.Vector.field(a.shape[1], dtype, shape=R) if vec else ti.field(dtype, shape=R)
             setattr(self, name, fld)
             self._params[name] = fld
-        # the parameters written in one launch a type (engine.fieldio), not a from_numpy a field
+        # the parameters and counters written by one kernel (engine.fieldio), not a from_numpy a field
+        self.writes = writes = writes if writes is not None else WriterGroup()
         self._writers = []
         for dt in (ti.f32, ti.i32):
             names = [n for n, (_a, d) in arrays.items() if d == dt]
             if names:
-                self._writers.append((names, ColumnWriter([self._params[n] for n in names], dt)))
+                self._writers.append((names, ColumnWriter([self._params[n] for n in names], dt, writes)))
         # ring heads, serial numbers and counts: state the kernels and Python share
         self.emitter_head, self.emitter_serial = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
         self.emitter_emitted, self.dropped = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
         self.emitter_moved = ti.field(ti.i32, shape=R)  # births of a launch whose ring slot was alive
         self._counters = ColumnWriter([self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped,
-                                       self.emitter_moved], ti.i32)
-        self.set_configs(configs)
-        if R:
-            self._zero_counters()
+                                       self.emitter_moved], ti.i32, writes)
+        with writes.held():
+            self.set_configs(configs)
+            if R:
+                self._zero_counters()
         # sub-emitter links (parent, child, event bit, count, min speed), fixed at build time
         if self.links:
             self.link_counts = ti.field(ti.i32, shape=CHUNKS)

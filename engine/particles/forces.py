@@ -22,9 +22,10 @@ class Forces:
     it for its particles) and the per-emitter parameters of the terms in use. Gravity (m/s²,
     scaled per emitter by ``gravity_scale``) and wind (m/s) are the control's."""
 
-    def __init__(self, cfg, emitter_configs, state, emitter_drag, control, rows: int = 0):
+    def __init__(self, cfg, emitter_configs, state, emitter_drag, control, rows: int = 0, writes=None):
         """``rows``: per-emitter parameter rows (at least one per emitter; spare rows for
-        emitters added later by :meth:`set_emitters`)."""
+        emitters added later by :meth:`set_emitters`). ``writes``: the
+        :class:`~engine.fieldio.WriterGroup` whose kernel writes them (the emitters')."""
         self.rows = R = max(len(emitter_configs), int(rows))
         self.control = control
         self.force_drag = ti.field(ti.f32, shape=())
@@ -41,7 +42,7 @@ class Forces:
         if self.use_turbulence:
             self._params["emitter_turbulence"] = ti.field(ti.f32, shape=R)
         self.__dict__.update(self._params)
-        self._writer = ColumnWriter(list(self._params.values()))
+        self._writer = ColumnWriter(list(self._params.values()), group=writes)
         self.set_emitters(emitter_configs)
         if self.attractor_count:
             n = self.attractor_count

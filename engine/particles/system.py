@@ -15,6 +15,7 @@ import copy
 import numpy as np
 
 from ..contacts import Contacts
+from ..fieldio import WriterGroup
 from ..system import SystemBase
 from ..ode.driver import Driver, SimulationDiverged, StepPolicy
 from ..ode.methods import METHODS
@@ -51,8 +52,14 @@ class ParticleSystem(SystemBase):
         rows = len(cfg.emitters) + int(spare[0])
         events = any(e.sub_emitters for e in cfg.emitters)
         self.state = ParticleState(self.layout.capacity, self.adaptive, events, interpolate)
-        self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state, rows)
-        self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control, rows)
+        # the emitters' and forces' per-emitter parameters and counters: one kernel writes them
+        # all, once at the build and again as emitters are added or the scene reset
+        self.writes = WriterGroup()
+        with self.writes.held():
+            self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state, rows,
+                                     self.writes)
+            self.forces = Forces(cfg.forces, cfg.emitters, self.state, self.emitters.emitter_drag, control, rows,
+                                 self.writes)
         self.colliders = colliders
         # two-way coupling (engine.particles.push): per-slot push records, compiled into the
         # step only where some emitter is two_way (the table's pusher is None otherwise)
@@ -273,8 +280,9 @@ class ParticleSystem(SystemBase):
         only: nothing is allocated or compiled."""
         for size in pool_sizes(cfg.emitters, 1.0 / cfg.fps)[len(self.cfg.emitters):]:
             self.layout.take(size)
-        self.emitters.set_configs(cfg.emitters)
-        self.forces.set_emitters(cfg.emitters)
+        with self.writes.held():
+            self.emitters.set_configs(cfg.emitters)
+            self.forces.set_emitters(cfg.emitters)
         if self.pusher is not None:
             self.pusher.masses = self._masses(cfg.emitters, self.emitters.count)
         self.cfg = cfg
@@ -282,17 +290,18 @@ class ParticleSystem(SystemBase):
     def reset(self) -> None:
         """Back to the state the build left (an empty pool at t = 0, the built emitters only),
         keeping every field and compiled kernel: a scene reused for a level restart."""
-        if self.cfg is not self._built:
-            self.layout.drop_after(len(self._built.emitters))
-            self.emitters.set_configs(self._built.emitters)
-            self.forces.set_emitters(self._built.emitters)
-            if self.pusher is not None:
-                self.pusher.masses = self._masses(self._built.emitters, self.emitters.count)
-            self.cfg = self._built
+        with self.writes.held():  # (parameters and zeroed counters: one launch)
+            if self.cfg is not self._built:
+                self.layout.drop_after(len(self._built.emitters))
+                self.emitters.set_configs(self._built.emitters)
+                self.forces.set_emitters(self._built.emitters)
+                if self.pusher is not None:
+                    self.pusher.masses = self._masses(self._built.emitters, self.emitters.count)
+                self.cfg = self._built
+            self.emitters.reset()
         if self.pusher is not None:
             self.pusher.clear()
         clear_pool(self.state)
-        self.emitters.reset()
         I = self.integrator
         I.nonfinite_t[None] = NO_FAILURE
         I.contact_log.count[None] = 0
