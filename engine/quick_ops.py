@@ -135,3 +135,17 @@ def install() -> bool:
         setattr(matrix_ops, name, quick(name, fn))
     matrix_ops.quick_originals = original
     return True
+
+
+def inline(fn):
+    """Marks ``fn``, a plain Python function of Taichi expressions, as one to call inside kernels.
+    The front end runs a plain function at compile time on its arguments' expressions, so its
+    operations are built where it is called and nothing is parsed or transformed (a ``ti.func`` is
+    parsed and transformed again at each call site, at every start). Only for code whose values do
+    not depend on the IR's shape — integer operations, exact scalings — since nothing is copied as
+    a ``ti.func``'s arguments and assignments are (see above). The front end warns at a call of a
+    function it does not take for Taichi's own; the mark is what it checks (``_is_taichi_function``;
+    it then reads ``fn.func.has_print``). Idempotent."""
+    fn._is_taichi_function = True
+    fn.func, fn.has_print = fn, False
+    return fn

@@ -266,3 +266,40 @@ def test_fixed_steps_fused_into_runs_give_the_same_bytes_as_step_by_step(monkeyp
     else:
         np.testing.assert_allclose(out[1][0], out[system.MAX_RUN][0], rtol=0, atol=1e-6)
         np.testing.assert_allclose(out[1][1], out[system.MAX_RUN][1], rtol=0, atol=1e-5)
+
+
+def _pcg_np(v):
+    """PCG's output permutation (engine.particles.rng.pcg_hash) in NumPy's uint32 arithmetic."""
+    v = np.asarray(v).astype(np.uint32)
+    with np.errstate(over="ignore"):
+        state = v * np.uint32(747796405) + np.uint32(2891336453)
+        word = ((state >> ((state >> np.uint32(28)) + np.uint32(4))) ^ state) * np.uint32(277803737)
+    return (word >> np.uint32(22)) ^ word
+
+
+def test_random_draws_are_the_pcg_hash_exactly():
+    """rand01 and pcg_hash, built straight into a kernel (engine.particles.rng), give the bits of
+    the hash computed in NumPy: seeds, streams and counters across the u32 range, several k."""
+    from engine.particles.rng import pcg_hash, rand01
+
+    rng = np.random.default_rng(11)
+    n = 4096
+    seed = rng.integers(0, 2**32, size=n, dtype=np.uint64).astype(np.int64)
+    stream, counter = rng.integers(0, 64, size=n), rng.integers(0, 2**31, size=n)
+    k = rng.integers(0, 11, size=n)
+    r, h = ti.field(ti.f32, shape=n), ti.field(ti.u32, shape=n)
+
+    @ti.kernel
+    def draw(seed: ti.types.ndarray(), stream: ti.types.ndarray(), counter: ti.types.ndarray(),
+             k: ti.types.ndarray()):
+        for i in range(n):
+            r[i] = rand01(ti.cast(seed[i], ti.u32), stream[i], counter[i], k[i])
+            h[i] = pcg_hash(counter[i])
+
+    draw(seed, stream.astype(np.int32), counter.astype(np.int32), k.astype(np.int32))
+    s32 = seed.astype(np.uint32)
+    inner = _pcg_np(stream.astype(np.uint32) * np.uint32(16) + k.astype(np.uint32) ^ _pcg_np(counter))
+    want = (_pcg_np(s32 ^ inner) >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0)
+    assert np.array_equal(h.to_numpy(), _pcg_np(counter))
+    assert np.array_equal(r.to_numpy(), want)
+    assert 0.45 < want.mean() < 0.55 and want.max() < 1.0
