@@ -201,11 +201,17 @@ class Colliders(ShapePoses, ProjectedShapes):
         if self.event_count < self.count:
             fixed.append((self.collider_bound, bound))
             self.collider_kind.from_numpy(kind)
-        ColumnWriter([f for f, _ in fixed], dtype).write(*[a for _, a in fixed])
         self._orient_keys = [None] * self.count  # what each shape's row below was made from
-        self._orient_rows = np.zeros((max(1, self.count), 12))
-        self._write(turned=self._orient([s.orientation_at(0.0) for s in self.specs],
-                                        [s.angular_velocity for s in self.specs]))
+        self._orient_rows = rows = np.zeros((max(1, self.count), 12))
+        self._orient([s.orientation_at(0.0) for s in self.specs], [s.angular_velocity for s in self.specs])
+        # the first orientations (normal, box axes, ω) in the same launch: the pose kernel
+        # (engine.collider_poses) then loads only in a scene whose shapes move or turn
+        fixed.append((self.collider_normal, rows[:, 0:3]))
+        if BOX in self.kinds:
+            fixed += [(self.collider_axis_x, rows[:, 3:6]), (self.collider_axis_z, rows[:, 6:9])]
+        if self.rotating:
+            fixed.append((self.collider_omega, rows[:, 9:12]))
+        ColumnWriter([f for f, _ in fixed], dtype).write(*[a for _, a in fixed])
         self._t = 0.0
         self._band = contact_band(dtype)
         self._moved = False

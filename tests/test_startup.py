@@ -375,3 +375,28 @@ def test_particle_parameters_and_counters_in_one_launch():
         s.close()
     finally:
         fieldio._write_groups = real
+
+
+@pytest.mark.parametrize("dtype", [ti.f32, ti.f64])
+def test_colliders_first_orientations_written_with_their_fixed_numbers(dtype):
+    """The shapes' first orientations (a tilted plane's normal, a turned box's axes, a spinning
+    capsule's ω) are written with their fixed numbers in one launch, the pose kernel left
+    unloaded: the values the pose kernel itself writes from the same rows."""
+    from engine.colliders import ColliderSpec, Colliders
+
+    q = np.array([0.9, 0.1, -0.3, 0.2])
+    q = tuple(q / np.linalg.norm(q))
+    specs = [ColliderSpec("plane", normal=(0.2, 1.0, -0.1), restitution=0.1),
+             ColliderSpec("box", point=(1.0, 0.5, 0.0), half_extents=(0.3, 0.2, 0.1), orientation=q),
+             ColliderSpec("capsule", point=(0.0, 1.0, 2.0), radius=0.2, half_length=0.4, orientation=q,
+                          angular_velocity=(0.0, 2.0, 0.5))]
+    C = Colliders(specs, dtype)
+    names = ("collider_normal", "collider_axis_x", "collider_axis_z", "collider_omega", "collider_point")
+    first = {n: getattr(C, n).to_numpy() for n in names}
+    assert abs(np.linalg.norm(first["collider_normal"][0]) - 1.0) < 1e-6
+    assert first["collider_omega"][2].tolist() == [0.0, 2.0, 0.5] and first["collider_axis_x"][1].any()
+    for n in names:
+        getattr(C, n).fill(0)
+    C._write(turned=True)  # the pose kernel, from the rows the build left
+    for n in names[:4]:
+        assert np.array_equal(getattr(C, n).to_numpy(), first[n]), n
