@@ -321,7 +321,8 @@ class ParticleSystem(SystemBase):
     def count_alive(self) -> int:
         """Live slots (particles not yet born this step included): one read-back per advance."""
         if self._alive is None:
-            self._alive = int(integrate.count_alive(self.state.particle_alive, self.layout.capacity))
+            self._alive = int(integrate.count_alive(self.state.particle_alive, self.layout.capacity,
+                                                    self.emitters.dropped, 0))
         return self._alive
 
     def ring_size(self, e: int) -> int:
@@ -329,7 +330,9 @@ class ParticleSystem(SystemBase):
         return int(self.layout.sizes[e])
 
     def dropped(self) -> int:
-        return int(self.emitters.dropped_counts().sum())
+        """Births dropped so far (a ring full of live particles), all emitters together."""
+        E = self.emitters
+        return int(integrate.count_alive(self.state.particle_alive, 0, E.dropped, len(E.configs)))
 
     def contacts(self, names=(), shapes=()):
         """Every contact recorded since the previous call (:class:`~engine.contacts.Contacts`,
