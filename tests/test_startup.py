@@ -342,9 +342,10 @@ def test_writer_group_writes_every_writer_in_one_kernel():
         ColumnWriter([ti.field(ti.f32, shape=2)], group=g)
 
 
-def test_particle_parameters_and_counters_in_one_launch():
-    """A particle system's emitter parameters (f32 and i32), counters and force parameters are
-    written by one launch of one kernel at the build, and again when emitters are added."""
+def test_scene_parameters_and_counters_in_one_launch():
+    """A scene's colliders' fixed numbers and its particle system's emitter parameters (f32 and
+    i32), counters and force parameters are written by one launch of one kernel at the build; the
+    same kernel writes the particles' again when emitters are added."""
     from engine import fieldio
     from engine.api import ParticleScene
     from engine.config import load_config
@@ -358,11 +359,14 @@ def test_particle_parameters_and_counters_in_one_launch():
         launches.append(args[0])
         return real(*args)
 
-    data = {"emitters": [{"name": "a", "rate": 10.0, "shape": "sphere", "radius": 0.25, "gravity_scale": 0.5}]}
+    data = {"emitters": [{"name": "a", "rate": 10.0, "shape": "sphere", "radius": 0.25, "gravity_scale": 0.5}],
+            "colliders": [{"type": "plane", "restitution": 0.3}]}
     fieldio._write_groups = counted
     try:
-        Scene(load_config(scene_dict(emitters=data["emitters"])), render=False)  # the build: one launch
-        assert len(launches) == 1 and len(launches[0].writers) == 4
+        built = Scene(load_config(scene_dict(**data)), render=False)  # the build: one launch
+        assert len(launches) == 1 and len(launches[0].writers) == 5
+        assert built.colliders.collider_restitution.to_numpy()[0] == np.float32(0.3)
+        assert built.particles.emitters.emitter_radius.to_numpy()[0] == np.float32(0.25)
         launches.clear()
         s = ParticleScene.from_dict(data, render=False, spare_emitters=1)  # (builds, then resets)
         assert len(launches) == 2 and launches[1] is launches[0]
@@ -400,3 +404,50 @@ def test_colliders_first_orientations_written_with_their_fixed_numbers(dtype):
     C._write(turned=True)  # the pose kernel, from the rows the build left
     for n in names[:4]:
         assert np.array_equal(getattr(C, n).to_numpy(), first[n]), n
+
+
+def test_kept_source_texts_come_back_until_their_file_changes(tmp_path):
+    """engine.runtime.KeptTexts: Taichi's source-position texts kept from one start to the next
+    come back as Taichi made them; a file whose size or time changed loses its texts, and a
+    cache file of another format or Taichi version, or not one at all, is ignored."""
+    from taichi.lang.ast import ast_transformer_utils as atu
+
+    original = atu.ASTTransformerContext.get_pos_info.original
+    src_file = tmp_path / "kernels.py"
+    src_file.write_text("def f(a):\n    b = a + 1\n    return b * 2\n")
+    src = src_file.read_text().splitlines()
+
+    class Ctx:
+        file, lineno_offset, indent = str(src_file), 0, 0
+        func = type("F", (), {"func": type("G", (), {"__name__": "f"})})()
+
+    Ctx.src = src
+    nodes = [n for n in ast.walk(ast.parse("\n".join(src))) if isinstance(n, (ast.stmt, ast.expr))]
+    keys = [(Ctx.file, 0, 0, "f", type(n), n.lineno, n.end_lineno, n.col_offset, n.end_col_offset) for n in nodes]
+    texts = [original(Ctx(), n) for n in nodes]
+    cache = tmp_path / "cache"
+    kept = runtime.KeptTexts(str(cache))
+    assert kept.get(keys[0]) is None
+    for k, t in zip(keys, texts):
+        kept.put(k, t)
+    kept.save()
+    again = runtime.KeptTexts(str(cache))
+    assert [again.get(k) for k in keys] == texts and all("^" in t for t in texts)
+    assert not again.changed  # nothing new: nothing written at exit
+    import marshal
+
+    path = cache / runtime.KeptTexts.NAME
+    whole = path.read_bytes()
+    (form, version), files = marshal.loads(whole)
+    path.write_bytes(marshal.dumps(((form, (0, 0, 1)), files)))  # kept by another Taichi
+    assert runtime.KeptTexts(str(cache)).get(keys[0]) is None
+    path.write_bytes(whole)
+    assert runtime.KeptTexts(str(cache)).get(keys[0]) == texts[0]
+    st = os.stat(src_file)
+    os.utime(src_file, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # the file touched
+    assert runtime.KeptTexts(str(cache)).get(keys[0]) is None
+    path.write_bytes(b"not a cache file")
+    assert runtime.KeptTexts(str(cache)).get(keys[0]) is None
+    nowhere = runtime.KeptTexts("")  # no offline cache: nothing kept
+    nowhere.put(keys[0], texts[0])
+    assert nowhere.get(keys[0]) is None
