@@ -136,7 +136,9 @@ class Colliders(ShapePoses, ProjectedShapes):
     # push rigid bodies, before its kernels compile; a view (soft bodies) never has one
     pusher = None
 
-    def __init__(self, specs: Sequence[ColliderSpec], dtype=ti.f32):
+    def __init__(self, specs: Sequence[ColliderSpec], dtype=ti.f32, writes=None):
+        """``writes``: a :class:`~engine.fieldio.WriterGroup` (a scene's) whose one kernel writes
+        the shapes' fixed numbers with the other systems' parameters; none: a launch of its own."""
         self.specs = list(specs)
         self.count = len(self.specs)
         self.dtype = dtype
@@ -211,7 +213,7 @@ class Colliders(ShapePoses, ProjectedShapes):
             fixed += [(self.collider_axis_x, rows[:, 3:6]), (self.collider_axis_z, rows[:, 6:9])]
         if self.rotating:
             fixed.append((self.collider_omega, rows[:, 9:12]))
-        ColumnWriter([f for f, _ in fixed], dtype).write(*[a for _, a in fixed])
+        ColumnWriter([f for f, _ in fixed], dtype, writes).write(*[a for _, a in fixed])
         self._t = 0.0
         self._band = contact_band(dtype)
         self._moved = False

@@ -40,9 +40,11 @@ class ParticleSystem(SystemBase):
     name = "particles"
 
     def __init__(self, cfg, colliders, control, stats, contacts: int = 0, interpolate: bool = False,
-                 spare=(0, 0)):
+                 spare=(0, 0), writes=None):
         """``spare``: (emitter rows, pool slots) allocated beyond the config's, so emitters can be
-        added between frames without new fields or compiles (:meth:`add_emitters`)."""
+        added between frames without new fields or compiles (:meth:`add_emitters`). ``writes``:
+        the :class:`~engine.fieldio.WriterGroup` to write the parameters with (a scene's, shared
+        with its colliders: one kernel for both); none: one of its own."""
         self.cfg = self._built = cfg
         sol = cfg.solver
         self.method, self.adaptive, self.stats = sol.integrator, sol.adaptive, stats
@@ -54,7 +56,7 @@ class ParticleSystem(SystemBase):
         self.state = ParticleState(self.layout.capacity, self.adaptive, events, interpolate)
         # the emitters' and forces' per-emitter parameters and counters: one kernel writes them
         # all, once at the build and again as emitters are added or the scene reset
-        self.writes = WriterGroup()
+        self.writes = writes if writes is not None else WriterGroup()
         with self.writes.held():
             self.emitters = Emitters(cfg.emitters, self.layout, cfg.seed, control.emitters, self.state, rows,
                                      self.writes)

@@ -17,6 +17,7 @@ import numpy as np
 from .. import runtime
 from ..colliders import ColliderSpec, Colliders
 from ..control import Control
+from ..fieldio import WriterGroup
 from ..ode.driver import DriverStats, SimulationDiverged
 from ..particles.system import ParticleSystem
 from ..paths import Path
@@ -107,14 +108,18 @@ class Scene:
         # the one shape table: particles read it, soft bodies through their thickness (a kept
         # body's kernels were compiled against the previous scene's table, so an unchanged
         # table is kept with them); rigid bodies publish their poses into it (RigidSystem.publish)
-        self.colliders = previous.colliders if same_colliders else Colliders(every)
-        if previous is None:
-            self.control = Control.for_scene(cfg, every)
-        else:
-            self.control = previous.control.rebuilt(cfg, every)
-            self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
-        self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate,
-                                         spare) if cfg.emitters else None)
+        # the shapes' fixed numbers and the particles' parameters: one kernel writes both, in one
+        # launch as the block ends (engine.fieldio; nothing inside reads them first)
+        writes = WriterGroup()
+        with writes.held():
+            self.colliders = previous.colliders if same_colliders else Colliders(every, writes=writes)
+            if previous is None:
+                self.control = Control.for_scene(cfg, every)
+            else:
+                self.control = previous.control.rebuilt(cfg, every)
+                self.t, self.frame, self.stats = previous.t, previous.frame, previous.stats
+            self.particles = (ParticleSystem(cfg, self.colliders, self.control, self.stats, contacts, interpolate,
+                                             spare, writes) if cfg.emitters else None)
         if previous is not None and previous.particles is not None and self.particles is not None:
             self.particles.carry_from(previous.particles)
         self.bodies = []
