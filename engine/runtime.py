@@ -283,56 +283,68 @@ _quicken_front_end()
 
 class KeptTexts:
     """Taichi's source-position texts (see ``_quicken_front_end``) kept from one start to the
-    next, beside the kernels in Taichi's offline cache. A text is a function of its function's
-    source file and the node's place in it, so a file's texts are kept with the file's size and
-    modification time and dropped when either changes (as Python's own bytecode cache does), and
-    all of them when Taichi's version or this format changes. Nothing is kept without an offline
-    cache (a host may run Taichi without one), for sources that are not files, or past
-    ``MAX_TEXTS``. Read with ``marshal`` (strings, ints and tuples only); written whole under a
-    temporary name and renamed, so a reader sees the old file or the new one, never a part."""
+    next, beside the kernels in Taichi's offline cache: one small file per source file, read when
+    a kernel from that source is first built (a scene reads those of the ~20 files its kernels
+    come from, not every text any scene ever made). A text is a function of its source file and
+    the node's place in it, so a file's texts are kept with the file's size and modification time
+    and dropped when either changes (as Python's own bytecode cache does), and all of them when
+    Taichi's version or this format changes. Nothing is kept without an offline cache (a host may
+    run Taichi without one), for sources that are not files, or past ``MAX_TEXTS`` a file. Read
+    with ``marshal`` (strings, ints and tuples only); written whole under a temporary name and
+    renamed, so a reader sees the old file or the new one, never a part."""
 
-    NAME = "particles-source-texts.marshal"
-    FORMAT = 1
-    MAX_TEXTS = 200_000
+    FOLDER = "particles-source-texts"
+    FORMAT = 2
+    MAX_TEXTS = 50_000
 
     def __init__(self, folder=None):
         self.folder = folder  # None: Taichi's offline cache folder, looked up at first use
-        self.files = None  # file → [(mtime_ns, size), {key without the file: text}]
-        self.changed = False
-        self._stamps = {}
+        self.files = {}  # source file → [(mtime_ns, size), {key without the file: text}, changed]
 
-    def _stamp(self, file):
-        if file not in self._stamps:
+    @property
+    def changed(self) -> bool:
+        return any(entry[2] for entry in self.files.values())
+
+    def _where(self):
+        if self.folder is None:
             try:
-                st = os.stat(file)
-                self._stamps[file] = (st.st_mtime_ns, st.st_size)
-            except (OSError, TypeError, ValueError):
-                self._stamps[file] = None
-        return self._stamps[file]
+                cfg = ti.lang.impl.current_cfg()
+                self.folder = os.path.join(cfg.offline_cache_file_path, self.FOLDER) if cfg.offline_cache else ""
+            except Exception:  # pragma: no cover - before init
+                self.folder = ""
+        return self.folder
+
+    def _path(self, file) -> str:
+        import hashlib
+
+        return os.path.join(self.folder, hashlib.sha1(file.encode("utf-8", "surrogatepass")).hexdigest()[:20] + ".marshal")
 
     def _header(self):
         return (self.FORMAT, tuple(ti.__version__))
 
-    def _open(self) -> None:
-        self.files = {}
-        if self.folder is None:
+    def _entry(self, file):
+        """The kept texts of ``file`` (read at first use; None: not a file, or no cache)."""
+        entry = self.files.get(file)
+        if entry is not None or file in self.files:
+            return entry
+        entry = None
+        if self._where() and isinstance(file, str):
             try:
-                cfg = ti.lang.impl.current_cfg()
-                self.folder = cfg.offline_cache_file_path if cfg.offline_cache else ""
-            except Exception:  # pragma: no cover - before init
-                self.folder = ""
-        if not self.folder:
-            return
-        try:
-            with open(os.path.join(self.folder, self.NAME), "rb") as f:
-                header, files = marshal.loads(f.read())  # (marshal.load(f) reads it piecemeal: 6x slower)
-            if header != self._header() or not isinstance(files, dict):
-                return
-            for file, (stamp, texts) in files.items():
-                if stamp == self._stamp(file) and isinstance(texts, dict):
-                    self.files[file] = [stamp, texts]
-        except Exception:  # missing, unreadable or not ours: start empty
-            self.files = {}
+                st = os.stat(file)
+                stamp = (st.st_mtime_ns, st.st_size)
+            except OSError:
+                stamp = None
+            if stamp is not None:
+                entry = [stamp, {}, False]
+                try:
+                    with open(self._path(file), "rb") as f:
+                        header, name, kept_stamp, texts = marshal.loads(f.read())
+                    if header == self._header() and name == file and kept_stamp == stamp and isinstance(texts, dict):
+                        entry[1] = texts
+                except Exception:  # missing, unreadable or not ours: start empty
+                    pass
+        self.files[file] = entry
+        return entry
 
     @staticmethod
     def _within(key):
@@ -342,43 +354,31 @@ class KeptTexts:
     def get(self, key):
         """The kept text for get_pos_info's ``key`` (file, line offset, indent, function name,
         node type, node lines and columns), or None."""
-        if self.files is None:
-            self._open()
-        entry = self.files.get(key[0])
+        entry = self._entry(key[0])
         return None if entry is None else entry[1].get(self._within(key))
 
     def put(self, key, text) -> None:
-        if self.files is None:
-            self._open()
-        if not self.folder:
-            return
-        entry = self.files.get(key[0])
-        if entry is None:
-            stamp = self._stamp(key[0])
-            if stamp is None:
-                return
-            entry = self.files[key[0]] = [stamp, {}]
-        entry[1][self._within(key)] = text
-        self.changed = True
+        entry = self._entry(key[0])
+        if entry is not None and len(entry[1]) < self.MAX_TEXTS:
+            entry[1][self._within(key)] = text
+            entry[2] = True
 
     def save(self) -> None:
-        """Write the texts if this process added any (at exit)."""
-        if not self.changed or not self.folder:
-            return
-        self.changed = False
-        files = {f: (stamp, texts) for f, (stamp, texts) in self.files.items()}
-        if sum(len(t) for _s, t in files.values()) > self.MAX_TEXTS:
-            return
-        path = os.path.join(self.folder, self.NAME)
-        tmp = f"{path}.{os.getpid()}.tmp"
-        try:
-            os.makedirs(self.folder, exist_ok=True)
-            with open(tmp, "wb") as f:
-                f.write(marshal.dumps((self._header(), files)))
-            os.replace(tmp, path)
-        except Exception:  # a read-only or full cache folder: the next start recomputes them
-            with contextlib.suppress(OSError):
-                os.remove(tmp)
+        """Write the texts of every file this process added to (at exit)."""
+        for file, entry in self.files.items():
+            if entry is None or not entry[2]:
+                continue
+            entry[2] = False
+            path = self._path(file)
+            tmp = f"{path}.{os.getpid()}.tmp"
+            try:
+                os.makedirs(self.folder, exist_ok=True)
+                with open(tmp, "wb") as f:
+                    f.write(marshal.dumps((self._header(), file, entry[0], entry[1])))
+                os.replace(tmp, path)
+            except Exception:  # a read-only or full cache folder: the next start recomputes them
+                with contextlib.suppress(OSError):
+                    os.remove(tmp)
 
 
 KEPT_TEXTS = KeptTexts()

@@ -436,10 +436,11 @@ def test_kept_source_texts_come_back_until_their_file_changes(tmp_path):
     assert not again.changed  # nothing new: nothing written at exit
     import marshal
 
-    path = cache / runtime.KeptTexts.NAME
+    (path,) = cache.iterdir()  # one file a source file
     whole = path.read_bytes()
-    (form, version), files = marshal.loads(whole)
-    path.write_bytes(marshal.dumps(((form, (0, 0, 1)), files)))  # kept by another Taichi
+    (form, version), name, stamp, kept_texts = marshal.loads(whole)
+    assert name == str(src_file) and len(kept_texts) == len(set(keys))
+    path.write_bytes(marshal.dumps(((form, (0, 0, 1)), name, stamp, kept_texts)))  # another Taichi's
     assert runtime.KeptTexts(str(cache)).get(keys[0]) is None
     path.write_bytes(whole)
     assert runtime.KeptTexts(str(cache)).get(keys[0]) == texts[0]
