@@ -206,10 +206,13 @@ def _quicken_front_end() -> None:
     # and a function's source lines and file, looked up (inspect: tokenize, getmodule) each
     # time a kernel is built or a ti.func inlined, once a function (weakly held: a scene's
     # closures go with it)
+    # (the lines kept from one start to the next too: inspect tokenizes the file from the
+    # function's first line to find its end, ~0.5 ms a function, ~100 functions for sparks)
     for name in ("getsourcelines", "getsourcefile"):
         found = getattr(kernel_impl, name, None)
         if found is not None:
-            setattr(kernel_impl, name, _memoized_by_function(found))
+            setattr(kernel_impl, name, _memoized_by_function(_kept_lines(found) if name == "getsourcelines"
+                                                             else found))
     # and a vector's dot, sum, norm, cross… built directly instead of inlined as functions, each
     # parsed and transformed at every call (engine.quick_ops: the same operations in the same order)
     from . import quick_ops
@@ -275,6 +278,26 @@ def _memoized_by_function(look_up):
     return memoized
 
 
+def _kept_lines(look_up):
+    """``getsourcelines`` (``look_up``) through :data:`KEPT_TEXTS`: a function's source lines and
+    first line number, kept with its file's texts (the same lines: a function of the file, checked
+    by its size and time, and of where the function starts)."""
+
+    def lines(fn):
+        code = getattr(fn, "__code__", None)
+        if code is None:
+            return look_up(fn)
+        where = ("<lines>", code.co_firstlineno, code.co_name)
+        got = KEPT_TEXTS.get_at(code.co_filename, where)
+        if got is None:
+            src, start = look_up(fn)
+            got = (list(src), int(start))
+            KEPT_TEXTS.put_at(code.co_filename, where, got)
+        return got
+
+    return lines
+
+
 # at import, not only at init: a kernel or ti.func at a module's top level is decorated (and asks
 # whether it is in a class) when that module is imported, often before init (the command line
 # imports the scene first)
@@ -308,10 +331,12 @@ class KeptTexts:
     def _where(self):
         if self.folder is None:
             try:
+                if ti.lang.impl.get_runtime().prog is None:
+                    return ""  # Taichi not started yet: its cache folder is not known
                 cfg = ti.lang.impl.current_cfg()
                 self.folder = os.path.join(cfg.offline_cache_file_path, self.FOLDER) if cfg.offline_cache else ""
-            except Exception:  # pragma: no cover - before init
-                self.folder = ""
+            except Exception:  # pragma: no cover
+                return ""
         return self.folder
 
     def _path(self, file) -> str:
@@ -328,7 +353,10 @@ class KeptTexts:
         if entry is not None or file in self.files:
             return entry
         entry = None
-        if self._where() and isinstance(file, str):
+        folder = self._where()
+        if self.folder is None:  # (not known before Taichi starts: asked again later)
+            return None
+        if folder and isinstance(file, str):
             try:
                 st = os.stat(file)
                 stamp = (st.st_mtime_ns, st.st_size)
@@ -354,13 +382,20 @@ class KeptTexts:
     def get(self, key):
         """The kept text for get_pos_info's ``key`` (file, line offset, indent, function name,
         node type, node lines and columns), or None."""
-        entry = self._entry(key[0])
-        return None if entry is None else entry[1].get(self._within(key))
+        return self.get_at(key[0], self._within(key))
 
     def put(self, key, text) -> None:
-        entry = self._entry(key[0])
+        self.put_at(key[0], self._within(key), text)
+
+    def get_at(self, file, where):
+        """What is kept for source ``file`` under ``where`` (a tuple marshal can write), or None."""
+        entry = self._entry(file)
+        return None if entry is None else entry[1].get(where)
+
+    def put_at(self, file, where, value) -> None:
+        entry = self._entry(file)
         if entry is not None and len(entry[1]) < self.MAX_TEXTS:
-            entry[1][self._within(key)] = text
+            entry[1][where] = value
             entry[2] = True
 
     def save(self) -> None:

@@ -452,3 +452,25 @@ def test_kept_source_texts_come_back_until_their_file_changes(tmp_path):
     nowhere = runtime.KeptTexts("")  # no offline cache: nothing kept
     nowhere.put(keys[0], texts[0])
     assert nowhere.get(keys[0]) is None
+
+
+def test_kept_source_lines_are_inspects(tmp_path, monkeypatch):
+    """engine.runtime's getsourcelines for Taichi's front end: inspect's lines and first line
+    number for a kernel's and a ti.func's function, kept and read back at the next start without
+    inspect (the tokenizing it replaces)."""
+    from engine.particles import integrate, rng
+
+    fns = [integrate._step_one.func.func, rng.rand01, rng.pcg_hash]  # (a ti.func's own function)
+    first = runtime.KeptTexts(str(tmp_path))
+    monkeypatch.setattr(runtime, "KEPT_TEXTS", first)
+    fresh = runtime._kept_lines(inspect.getsourcelines)
+    got = [fresh(f) for f in fns]
+    assert [(list(a), b) for a, b in got] == [(list(a), b) for a, b in map(inspect.getsourcelines, fns)]
+    first.save()
+
+    def no_inspect(fn):
+        raise AssertionError("read back, not looked up")
+
+    monkeypatch.setattr(runtime, "KEPT_TEXTS", runtime.KeptTexts(str(tmp_path)))
+    again = runtime._kept_lines(no_inspect)
+    assert [again(f) for f in fns] == got
