@@ -13,6 +13,7 @@ so the values do not depend on how the IR around them is shaped: the same bits a
 (tests/test_particles.py: the bits of a NumPy version of the hash).
 """
 import taichi as ti
+from taichi.lang import impl
 from taichi.lang.expr import Expr
 
 from ..quick_ops import inline
@@ -24,11 +25,18 @@ def _u32(c: int):
     return Expr(c, dtype=ti.u32)
 
 
+def _local(x):
+    """x into a local variable, as a ``ti.func``'s assignment puts it: later uses read the variable.
+    (An expression used twice is otherwise built twice when the kernel is lowered, and the hash
+    nests three deep: spawn's IR grew so large that it took 18.5 s to compile instead of ~1.)"""
+    return impl.expr_init(x)
+
+
 @inline
 def pcg_hash(v):
     """u32 hash of ``v`` (cast to u32); Taichi scope only."""
-    state = ti.cast(v, ti.u32) * _u32(747796405) + _u32(2891336453)
-    word = ((state >> ((state >> _u32(28)) + _u32(4))) ^ state) * _u32(277803737)
+    state = _local(ti.cast(v, ti.u32) * _u32(747796405) + _u32(2891336453))
+    word = _local(((state >> ((state >> _u32(28)) + _u32(4))) ^ state) * _u32(277803737))
     return (word >> _u32(22)) ^ word
 
 
@@ -36,6 +44,6 @@ def pcg_hash(v):
 def rand01(seed, stream, counter, k):
     """Uniform in [0, 1) from 24 hash bits; ``k`` picks one of several numbers per draw.
     Taichi scope only."""
-    h = pcg_hash(ti.cast(seed, ti.u32) ^ pcg_hash(ti.cast(stream, ti.u32) * _u32(16) + ti.cast(k, ti.u32)
-                                                   ^ pcg_hash(ti.cast(counter, ti.u32))))
+    h = _local(pcg_hash(ti.cast(seed, ti.u32) ^ pcg_hash(ti.cast(stream, ti.u32) * _u32(16) + ti.cast(k, ti.u32)
+                                                          ^ pcg_hash(ti.cast(counter, ti.u32)))))
     return ti.cast(h >> _u32(8), ti.f32) * (1.0 / 16777216.0)
