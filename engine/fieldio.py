@@ -6,12 +6,13 @@ load on a warm start (timed at their first launch: ~0.2 s of sparks' start). A
 :class:`ColumnWriter` writes a fixed list of fields, all of one scalar type, from one array of
 rows (n, C) — a scalar field one column, a vector field as many as it has components — in one
 kernel: one compile for the list. A :class:`WriterGroup` makes several writers' writes (of any of
-the three types) one launch of one kernel: a particle system's emitter parameters, counters and
-force parameters were four kernels to load at each start, 12-16 ms each.
+the three types) one launch of one kernel: a scene's colliders' fixed numbers and first
+orientations and its particles' emitter parameters, counters and force parameters were six kernels
+to load at each start, 12-16 ms each.
 """
-import contextlib
-
 # (no __future__ annotations: Taichi reads the kernels' annotations)
+
+import contextlib
 
 import numpy as np
 import taichi as ti
@@ -26,7 +27,7 @@ class ColumnWriter:
 
     def __init__(self, fields, dtype=ti.f32, group=None):
         """``group``: a :class:`WriterGroup` whose one kernel makes this writer's writes."""
-        self.fields, self.dtype = tuple(fields), dtype
+        self.fields = tuple(fields)
         self.widths = tuple(f.n if isinstance(f, MatrixField) else 0 for f in self.fields)
         offsets, at = [], 0
         for w in self.widths:

@@ -23,7 +23,6 @@ from . import integrate
 from .emitters import Emitters
 from .forces import Forces
 from .integrate import NO_FAILURE, ParticleIntegrator
-from .potential import POST, PRE, _save
 from .pool import PARTICLE_FIELDS, ParticleState, PoolLayout, pool_sizes
 from .slots import clear as clear_pool
 from .slots import save_positions
@@ -171,14 +170,14 @@ class ParticleSystem(SystemBase):
                     break
                 k += 1
         if self.layout.capacity:
-            self._kick(t, h, PRE)
+            self._kick(t, h, second=False)
             if k == 1:
                 integrate.step_fixed(self.integrator, t, h)
             else:
                 integrate.step_fixed_run(self.integrator, t0, h, j, k)
             if self.interact is not None:  # (k == 1: interacting particles take no fused runs)
                 self.interact.step(h)
-            self._kick(t + h, h, POST)
+            self._kick(t + h, h, second=True)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t0 + (j + k) * h)
         return k
@@ -189,8 +188,10 @@ class ParticleSystem(SystemBase):
         if not self.layout.capacity:
             return 0.0
         if self.potentials:  # the first half kick goes into the velocities: kept to undo it
+            from .potential import _save
+
             _save(self.state.particle_vel, self._vel_kept, self.layout.capacity)
-            self._kick(t, h, PRE)
+            self._kick(t, h, second=False)
         return float(integrate.attempt(self.integrator, t, h, self.atol, self.rtol, self.tol_g))
 
     def commit(self, t: float, h: float) -> None:
@@ -198,7 +199,7 @@ class ParticleSystem(SystemBase):
             integrate.commit(self.integrator, t, h)
             if self.interact is not None:
                 self.interact.step(h)
-            self._kick(t + h, h, POST)
+            self._kick(t + h, h, second=True)
         self.emitters.emit_children()
         self.emitters.carry_local(t, t + h)
 
@@ -206,18 +207,25 @@ class ParticleSystem(SystemBase):
         # the trial sits in cand_pos / cand_vel until committed; a rejected attempt's first half
         # kick is undone (the retry kicks again with its own h)
         if self.potentials and self.layout.capacity:
+            from .potential import _save
+
             _save(self._vel_kept, self.state.particle_vel, self.layout.capacity)
 
     # -- external potentials (engine.particles.potential) -----------------------------------------
-    def _kick(self, t: float, h: float, phase: int) -> None:
-        for p in self.potentials:  # in the order added: a fixed order of additions
-            p.half_kick(t, h, phase)
+    def _kick(self, t: float, h: float, second: bool) -> None:
+        """Each potential's half kick, the step's first or ``second`` (engine.particles.potential:
+        imported, with the autodiff and element code it uses, only by a scene that has one)."""
+        if self.potentials:
+            from .potential import POST, PRE
+
+            for p in self.potentials:  # in the order added: a fixed order of additions
+                p.half_kick(t, h, POST if second else PRE)
 
     def add_potential(self, potential, params, emitter_rows, name: str) -> None:
         """Act on the particles of ``emitter_rows`` (indices; None: every row, spare ones too)
         with ``potential`` (a checked ``ti.func``) and ``params`` (checked (P,) floats). Its
         kernels are compiled here; one Taichi cannot compile raises and nothing is added."""
-        from .potential import ParticlePotential
+        from .potential import ParticlePotential, _save
 
         rows = np.ones(self.emitters.count, np.int32)
         if emitter_rows is not None:
