@@ -65,7 +65,10 @@ class WriterGroup:
     """One kernel for several :class:`ColumnWriter` (those built with ``group=`` this group, all
     before its first launch: the kernel is compiled for them). A writer's write launches that
     kernel for its rows alone; inside :meth:`held`, the writes are kept and made in one launch as
-    the block ends (none if it raises). Later writes to one writer's rows win."""
+    the outermost block ends (none if it raises; an inner block that raises inside an outer one
+    that goes on leaves its writes to the outer one). A second write to one writer inside a block
+    replaces the first whole, its rows past the second's included (the engine's writers always
+    write all their rows)."""
 
     def __init__(self):
         self.writers, self._held, self._holding, self._launched = [], {}, 0, False

@@ -280,15 +280,21 @@ def _memoized_by_function(look_up):
 
 def _kept_lines(look_up):
     """``getsourcelines`` (``look_up``) through :data:`KEPT_TEXTS`: a function's source lines and
-    first line number, kept with its file's texts (the same lines: a function of the file, checked
-    by its size and time, and of where the function starts)."""
+    first line number, kept with its file's texts. What inspect returns is a function of the
+    file's text (which :class:`KeptTexts` checks by its digest, read through ``linecache`` as
+    inspect reads it, at every look-up: an edited and reloaded module gets its new lines) and of
+    where the unwrapped function starts (inspect follows ``__wrapped__``; so does the key)."""
+    import inspect
 
     def lines(fn):
-        code = getattr(fn, "__code__", None)
-        if code is None:
+        try:
+            code = inspect.unwrap(fn).__code__
+        except (AttributeError, ValueError):
+            return look_up(fn)
+        if not os.path.isabs(code.co_filename):
             return look_up(fn)
         where = ("<lines>", code.co_firstlineno, code.co_name)
-        got = KEPT_TEXTS.get_at(code.co_filename, where)
+        got = KEPT_TEXTS.get_at(code.co_filename, where, check=True)
         if got is None:
             src, start = look_up(fn)
             got = (list(src), int(start))
@@ -305,28 +311,32 @@ _quicken_front_end()
 
 
 class KeptTexts:
-    """Taichi's source-position texts (see ``_quicken_front_end``) kept from one start to the
-    next, beside the kernels in Taichi's offline cache: one small file per source file, read when
-    a kernel from that source is first built (a scene reads those of the ~20 files its kernels
-    come from, not every text any scene ever made). A text is a function of its source file and
-    the node's place in it, so a file's texts are kept with the file's size and modification time
-    and dropped when either changes (as Python's own bytecode cache does), and all of them when
-    Taichi's version or this format changes. Nothing is kept without an offline cache (a host may
-    run Taichi without one), for sources that are not files, or past ``MAX_TEXTS`` a file. Read
-    with ``marshal`` (strings, ints and tuples only); written whole under a temporary name and
-    renamed, so a reader sees the old file or the new one, never a part."""
+    """Taichi's source-position texts and functions' source lines (see ``_quicken_front_end``)
+    kept from one start to the next, beside the kernels in Taichi's offline cache: one small file
+    per source file, read when a kernel from that source is first built (a scene reads those of
+    the ~20 files its kernels come from). What is kept is a function of the source file's text,
+    so each file's entries are kept with a digest of that text, read through ``linecache`` as
+    inspect reads it, and dropped when it differs (an edit, whatever it does to the file's size
+    or time); all of them when Taichi's or Python's version or this format changes. Source lines
+    are looked up with ``check``: the file's text is checked again (``linecache.checkcache``), so
+    an edited and reloaded module gets its new lines in the same process. Nothing is kept
+    without an offline cache (a host may run Taichi without one), for sources that are not files
+    at absolute paths, or past ``MAX_TEXTS`` a file. Read with ``marshal`` (strings, ints,
+    tuples and lists only); written whole under a temporary name and renamed, so a reader sees
+    the old file or the new one, never a part."""
 
     FOLDER = "particles-source-texts"
-    FORMAT = 2
+    FORMAT = 3
     MAX_TEXTS = 50_000
 
     def __init__(self, folder=None):
         self.folder = folder  # None: Taichi's offline cache folder, looked up at first use
-        self.files = {}  # source file → [(mtime_ns, size), {key without the file: text}, changed]
+        # source file → [digest of its text, {key without the file: value}, changed, its lines]
+        self.files = {}
 
     @property
     def changed(self) -> bool:
-        return any(entry[2] for entry in self.files.values())
+        return any(entry[2] for entry in self.files.values() if entry is not None)
 
     def _where(self):
         if self.folder is None:
@@ -334,43 +344,62 @@ class KeptTexts:
                 if ti.lang.impl.get_runtime().prog is None:
                     return ""  # Taichi not started yet: its cache folder is not known
                 cfg = ti.lang.impl.current_cfg()
-                self.folder = os.path.join(cfg.offline_cache_file_path, self.FOLDER) if cfg.offline_cache else ""
+                self.folder = (os.path.abspath(os.path.join(cfg.offline_cache_file_path, self.FOLDER))
+                               if cfg.offline_cache else "")
             except Exception:  # pragma: no cover
                 return ""
         return self.folder
 
+    def forget_folder(self) -> None:
+        """Look the cache folder up again (Taichi reset: the next program may keep another)."""
+        self.folder = None
+
     def _path(self, file) -> str:
         import hashlib
 
-        return os.path.join(self.folder, hashlib.sha1(file.encode("utf-8", "surrogatepass")).hexdigest()[:20] + ".marshal")
+        name = hashlib.sha1(file.encode("utf-8", "surrogatepass")).hexdigest()[:20]
+        return os.path.join(self.folder, name + ".marshal")
 
-    def _header(self):
-        return (self.FORMAT, tuple(ti.__version__))
+    @staticmethod
+    def _header():
+        return (KeptTexts.FORMAT, tuple(ti.__version__), tuple(sys.version_info[:2]))
 
-    def _entry(self, file):
-        """The kept texts of ``file`` (read at first use; None: not a file, or no cache)."""
+    def _entry(self, file, check=False):
+        """The kept entry of ``file`` (read at first use; None: not a file, or no cache);
+        ``check``: compare the file's text (linecache, re-stat'ed) with the entry's again."""
         entry = self.files.get(file)
-        if entry is not None or file in self.files:
+        if entry is None and file in self.files:
+            return None
+        if entry is not None and not check:
             return entry
-        entry = None
         folder = self._where()
         if self.folder is None:  # (not known before Taichi starts: asked again later)
             return None
-        if folder and isinstance(file, str):
-            try:
-                st = os.stat(file)
-                stamp = (st.st_mtime_ns, st.st_size)
-            except OSError:
-                stamp = None
-            if stamp is not None:
-                entry = [stamp, {}, False]
-                try:
-                    with open(self._path(file), "rb") as f:
-                        header, name, kept_stamp, texts = marshal.loads(f.read())
-                    if header == self._header() and name == file and kept_stamp == stamp and isinstance(texts, dict):
-                        entry[1] = texts
-                except Exception:  # missing, unreadable or not ours: start empty
-                    pass
+        if not folder or not isinstance(file, str) or not os.path.isabs(file):
+            self.files[file] = None
+            return None
+        if check:
+            linecache.checkcache(file)
+        lines = linecache.getlines(file)
+        if entry is not None and entry[3] is lines:
+            return entry
+        if not lines:
+            self.files[file] = None
+            return None
+        import hashlib
+
+        digest = hashlib.sha1("".join(lines).encode("utf-8", "surrogatepass")).hexdigest()
+        if entry is not None and entry[0] == digest:
+            entry[3] = lines
+            return entry
+        entry = [digest, {}, False, lines]
+        try:
+            with open(self._path(file), "rb") as f:
+                header, name, kept_digest, texts = marshal.loads(f.read())  # (load(f): piecemeal, 6x slower)
+            if header == self._header() and name == file and kept_digest == digest and isinstance(texts, dict):
+                entry[1] = texts
+        except Exception:  # missing, unreadable or not ours: start empty
+            pass
         self.files[file] = entry
         return entry
 
@@ -387,9 +416,9 @@ class KeptTexts:
     def put(self, key, text) -> None:
         self.put_at(key[0], self._within(key), text)
 
-    def get_at(self, file, where):
+    def get_at(self, file, where, check=False):
         """What is kept for source ``file`` under ``where`` (a tuple marshal can write), or None."""
-        entry = self._entry(file)
+        entry = self._entry(file, check)
         return None if entry is None else entry[1].get(where)
 
     def put_at(self, file, where, value) -> None:
@@ -399,24 +428,31 @@ class KeptTexts:
             entry[2] = True
 
     def save(self) -> None:
-        """Write the texts of every file this process added to (at exit)."""
-        for file, entry in self.files.items():
+        """Write the entries of every file this process added to (at exit)."""
+        import tempfile
+
+        for file, entry in list(self.files.items()):
             if entry is None or not entry[2]:
                 continue
             entry[2] = False
-            path = self._path(file)
-            tmp = f"{path}.{os.getpid()}.tmp"
+            if not self._where():
+                continue
+            tmp = None
             try:
                 os.makedirs(self.folder, exist_ok=True)
-                with open(tmp, "wb") as f:
+                fd, tmp = tempfile.mkstemp(dir=self.folder, suffix=".tmp")
+                with os.fdopen(fd, "wb") as f:
                     f.write(marshal.dumps((self._header(), file, entry[0], entry[1])))
-                os.replace(tmp, path)
+                os.replace(tmp, self._path(file))
             except Exception:  # a read-only or full cache folder: the next start recomputes them
-                with contextlib.suppress(OSError):
-                    os.remove(tmp)
+                if tmp is not None:
+                    with contextlib.suppress(OSError):
+                        os.remove(tmp)
 
 
 KEPT_TEXTS = KeptTexts()
+atexit.register(KEPT_TEXTS.save)  # (also in a host that started Taichi itself; a no-op if nothing new)
+_reset_hooks.append(KEPT_TEXTS.forget_folder)
 
 
 def _write_cache_at_exit() -> None:

@@ -408,8 +408,11 @@ def test_colliders_first_orientations_written_with_their_fixed_numbers(dtype):
 
 def test_kept_source_texts_come_back_until_their_file_changes(tmp_path):
     """engine.runtime.KeptTexts: Taichi's source-position texts kept from one start to the next
-    come back as Taichi made them; a file whose size or time changed loses its texts, and a
-    cache file of another format or Taichi version, or not one at all, is ignored."""
+    come back as Taichi made them; an edit to their file drops them, even one that keeps its size
+    and time; a cache file of another format or Taichi version, or not one at all, is ignored."""
+    import linecache
+    import marshal
+
     from taichi.lang.ast import ast_transformer_utils as atu
 
     original = atu.ASTTransformerContext.get_pos_info.original
@@ -434,18 +437,18 @@ def test_kept_source_texts_come_back_until_their_file_changes(tmp_path):
     again = runtime.KeptTexts(str(cache))
     assert [again.get(k) for k in keys] == texts and all("^" in t for t in texts)
     assert not again.changed  # nothing new: nothing written at exit
-    import marshal
-
-    (path,) = cache.iterdir()  # one file a source file
+    (path,) = cache.glob("*.marshal")  # one file a source file
     whole = path.read_bytes()
-    (form, version), name, stamp, kept_texts = marshal.loads(whole)
+    header, name, digest, kept_texts = marshal.loads(whole)
     assert name == str(src_file) and len(kept_texts) == len(set(keys))
-    path.write_bytes(marshal.dumps(((form, (0, 0, 1)), name, stamp, kept_texts)))  # another Taichi's
-    assert runtime.KeptTexts(str(cache)).get(keys[0]) is None
+    path.write_bytes(marshal.dumps(((header[0], (0, 0, 1), header[2]), name, digest, kept_texts)))
+    assert runtime.KeptTexts(str(cache)).get(keys[0]) is None  # kept by another Taichi
     path.write_bytes(whole)
     assert runtime.KeptTexts(str(cache)).get(keys[0]) == texts[0]
     st = os.stat(src_file)
-    os.utime(src_file, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # the file touched
+    src_file.write_text("def f(a):\n    b = a + 2\n    return b * 2\n")  # the same size ...
+    os.utime(src_file, ns=(st.st_atime_ns, st.st_mtime_ns))  # ... and time
+    linecache.clearcache()  # (as a new process reads it)
     assert runtime.KeptTexts(str(cache)).get(keys[0]) is None
     path.write_bytes(b"not a cache file")
     assert runtime.KeptTexts(str(cache)).get(keys[0]) is None
@@ -456,21 +459,37 @@ def test_kept_source_texts_come_back_until_their_file_changes(tmp_path):
 
 def test_kept_source_lines_are_inspects(tmp_path, monkeypatch):
     """engine.runtime's getsourcelines for Taichi's front end: inspect's lines and first line
-    number for a kernel's and a ti.func's function, kept and read back at the next start without
-    inspect (the tokenizing it replaces)."""
+    number, kept and read back at the next start without inspect; each of two functions wrapped
+    by one decorator gets its own (inspect follows ``__wrapped__``); an edited and reloaded module
+    gets its new lines in the same process."""
+    import importlib
+    import sys as _sys
+
     from engine.particles import integrate, rng
 
-    fns = [integrate._step_one.func.func, rng.rand01, rng.pcg_hash]  # (a ti.func's own function)
-    first = runtime.KeptTexts(str(tmp_path))
+    mod = tmp_path / "kept_lines_mod.py"
+    mod.write_text("import functools\n\n\ndef deco(f):\n    @functools.wraps(f)\n    def w(*a):\n"
+                   "        return f(*a)\n    return w\n\n\n@deco\ndef alpha(x):\n    return x + 1\n\n\n"
+                   "@deco\ndef beta(x):\n    return x * 100\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    m = importlib.import_module("kept_lines_mod")
+    fns = [integrate._step_one.func.func, rng.rand01, rng.pcg_hash, m.alpha, m.beta]
+    first = runtime.KeptTexts(str(tmp_path / "cache"))
     monkeypatch.setattr(runtime, "KEPT_TEXTS", first)
     fresh = runtime._kept_lines(inspect.getsourcelines)
     got = [fresh(f) for f in fns]
     assert [(list(a), b) for a, b in got] == [(list(a), b) for a, b in map(inspect.getsourcelines, fns)]
+    assert "x + 1" in "".join(got[3][0]) and "x * 100" in "".join(got[4][0])
     first.save()
 
     def no_inspect(fn):
         raise AssertionError("read back, not looked up")
 
-    monkeypatch.setattr(runtime, "KEPT_TEXTS", runtime.KeptTexts(str(tmp_path)))
+    monkeypatch.setattr(runtime, "KEPT_TEXTS", runtime.KeptTexts(str(tmp_path / "cache")))
     again = runtime._kept_lines(no_inspect)
     assert [again(f) for f in fns] == got
+    mod.write_text(mod.read_text().replace("x * 100", "x * 1000 - 7"))  # edited, then reloaded
+    m = importlib.reload(m)
+    assert "x * 1000 - 7" in "".join(fresh(m.beta)[0])
+    assert fresh(m.beta) == tuple(inspect.getsourcelines(m.beta))
+    _sys.modules.pop("kept_lines_mod", None)
