@@ -57,7 +57,7 @@ class ColumnWriter:
         if self.group is not None:
             self.group._put(self, rows)
         else:
-            _write_rows(self, rows)
+            _write_rows(self, rows.reshape(-1), len(rows))
 
 
 @ti.data_oriented
@@ -121,17 +121,6 @@ class WriterGroup:
 _KINDS = {np.float32: 0, np.int32: 1, np.float64: 2}
 
 
-@ti.kernel
-def _write_rows(W: ti.template(), rows: ti.types.ndarray(ndim=2)):
-    for e in range(rows.shape[0]):
-        for c in ti.static(range(len(W.fields))):
-            if ti.static(W.widths[c] == 0):
-                W.fields[c][e] = rows[e, W.offsets[c]]
-            else:
-                for k in ti.static(range(W.widths[c])):
-                    W.fields[c][e][k] = rows[e, W.offsets[c] + k]
-
-
 @ti.func
 def _rows_from(W: ti.template(), flat: ti.template(), start, n):
     """Writer W's n rows, row-major in ``flat`` from ``start`` (``ColumnWriter.write``'s rows)."""
@@ -143,6 +132,12 @@ def _rows_from(W: ti.template(), flat: ti.template(), start, n):
             else:
                 for k in ti.static(range(W.widths[c])):
                     W.fields[c][e][k] = flat[base + W.offsets[c] + k]
+
+
+@ti.kernel
+def _write_rows(W: ti.template(), flat: ti.types.ndarray(ndim=1), n: ti.i32):
+    """Writer W's n rows, row-major in ``flat`` (a writer of no group)."""
+    _rows_from(W, flat, 0, n)
 
 
 @ti.kernel

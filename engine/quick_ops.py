@@ -45,8 +45,7 @@ def install() -> bool:
             return tuple(x.get_shape())
         return None
 
-    def copy(x):
-        return impl.expr_init(x)  # (an inlined function's argument, passed by value)
+    copy = local  # (an inlined function's argument, passed by value)
 
     def item(x, *index):
         return impl.subscript(None, x, *index)
@@ -137,13 +136,23 @@ def install() -> bool:
     return True
 
 
+def local(x):
+    """x put into a local variable, as a ``ti.func``'s argument or assignment puts it: later uses
+    read the variable (an expression used twice is otherwise built twice when the kernel is
+    lowered). Taichi scope only."""
+    from taichi.lang import impl
+
+    return impl.expr_init(x)
+
+
 def inline(fn):
     """Marks ``fn``, a plain Python function of Taichi expressions, as one to call inside kernels.
     The front end runs a plain function at compile time on its arguments' expressions, so its
     operations are built where it is called and nothing is parsed or transformed (a ``ti.func`` is
     parsed and transformed again at each call site, at every start). Only for code whose values do
-    not depend on the IR's shape — integer operations, exact scalings — since nothing is copied as
-    a ``ti.func``'s arguments and assignments are (see above). The front end warns at a call of a
+    not depend on the IR's shape — integer operations, exact scalings — unless it copies as a
+    ``ti.func`` does (:func:`local`; see above). A value used more than once should go through
+    :func:`local` all the same, or it is built once per use. The front end warns at a call of a
     function it does not take for Taichi's own; the mark is what it checks (``_is_taichi_function``;
     it then reads ``fn.func.has_print``). Idempotent."""
     fn._is_taichi_function = True

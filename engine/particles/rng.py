@@ -7,29 +7,24 @@ GPU Rendering", JCGT 2020, recommend it for quality per cost).
 Both are plain Python functions called inside kernels (``engine.quick_ops.inline``), not
 ``ti.func``: Taichi runs a plain function at compile time on its arguments' expressions, so the
 calls build the hash's operations directly, where a ``ti.func`` is parsed and its AST transformed
-again at each call site at every start (spawn's 10 draws and curl noise's lattice hashes: ~30 ms of sparks' warm start). The
-operations are integer ones and the last an exact scaling (a 24-bit integer to f32, times 2^-24),
-so the values do not depend on how the IR around them is shaped: the same bits as the ``ti.func``
-(tests/test_particles.py: the bits of a NumPy version of the hash).
+again at each call site at every start (spawn's 10 draws and curl noise's lattice hashes: ~30 ms
+of sparks' warm start). The operations are integer ones and the last an exact scaling (a 24-bit
+integer to f32, times 2^-24), so the values do not depend on how the IR around them is shaped:
+the same bits as the ``ti.func`` (tests/test_particles.py: the bits of a NumPy version of the
+hash). Their intermediate values go through local variables (``quick_ops.local``) as the
+``ti.func``'s did: built as plain expressions, a value used twice was built twice when the kernel
+was lowered, and the hash nests three deep (spawn took 18.5 s to compile cold instead of 0.25 s).
 """
 import taichi as ti
-from taichi.lang import impl
 from taichi.lang.expr import Expr
 
-from ..quick_ops import inline
+from ..quick_ops import inline, local as _local
 
 
 def _u32(c: int):
     """A u32 constant, as the front end builds ``ti.u32(c)`` written in a kernel (a data type
     called from Python, as it would be in a plain function, refuses)."""
     return Expr(c, dtype=ti.u32)
-
-
-def _local(x):
-    """x into a local variable, as a ``ti.func``'s assignment puts it: later uses read the variable.
-    (An expression used twice is otherwise built twice when the kernel is lowered, and the hash
-    nests three deep: spawn's IR grew so large that it took 18.5 s to compile instead of ~1.)"""
-    return impl.expr_init(x)
 
 
 @inline
