@@ -179,3 +179,48 @@ def test_render_into_a_given_array_and_refuse_a_wrong_one():
                 np.zeros((96, 54, 4), np.uint8), np.zeros((54, 192, 4), np.uint8)[:, ::2]):
         with pytest.raises(ValueError, match="out"):
             s.render(out=bad)
+
+
+def test_tone_map_table_samples_aces_and_srgb():
+    """The tone-map table against its closed form (ACES fit, then sRGB, 8 bits, in f64): its bins
+    tile [2^-17, 8) edge to edge, each entry lies between the closed form at its bin's two edges
+    (the curve rises), and read as the kernels read it (by a value's bits) it gives the closed
+    form's own value for all but a few tenths of a percent of values."""
+    from engine.render.composite import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, tonemap, tonemap_bins, tonemap_table
+
+    table, (lo, hi) = tonemap_table(), tonemap_bins()
+    assert lo[0] == 2.0 ** -17 and hi[-1] == 8.0 and np.array_equal(lo[1:], hi[:-1])
+    assert np.all(tonemap(lo) <= table) and np.all(table <= tonemap(hi))
+    assert table[0] == 0 and table[-1] == 255 and np.all(np.diff(table) >= 0)
+    x = np.exp(np.random.default_rng(5).uniform(np.log(1e-6), np.log(8.0), 200_000)).astype(np.float32)
+    bits = np.clip(x, np.float32(LUT_LO), np.float32(LUT_HI)).view(np.uint32)
+    looked_up = table[(bits >> (23 - LUT_BITS)).astype(np.int64) - LUT_BIAS]
+    off = looked_up - tonemap(x)
+    assert np.abs(off).max() <= 1 and np.mean(off != 0) < 0.005, np.mean(off != 0)
+
+
+def test_the_kernels_tone_map_by_the_table():
+    """``pack`` (through ``pack_background``: a background alone, exposure 2) reads the table
+    entry of each channel's bin — bit for bit what NumPy finds for the same f32 values — with
+    below the first bin, negatives and NaN black, past 8 and +inf white, and alpha 255."""
+    import taichi as ti
+
+    from engine.render.composite import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, build_composite_kernels, tonemap_table
+
+    k = build_composite_kernels(True, True)
+    rng = np.random.default_rng(11)
+    special = np.float32([0.0, -1.0, np.nan, np.inf, -np.inf, 1e-30, LUT_LO, LUT_HI, 8.0, 1e6, 0.5, 3.6])
+    rgb = np.concatenate([special, np.exp(rng.uniform(np.log(1e-7), np.log(20.0), 3 * 4096 - len(special)))])
+    rgb = rgb.astype(np.float32).reshape(-1, 3)
+    bg = np.concatenate([rgb, np.ones((len(rgb), 1), np.float32)], axis=1)
+    W, H = 64, len(bg) // 64
+    arr = ti.ndarray(ti.types.vector(4, ti.f32), len(bg))
+    arr.from_numpy(bg)
+    packed = np.zeros(len(bg) // 2, np.uint64)
+    k["pack_background"](arr, packed, W, H, 0, 0, W, H, 2.0, 0)
+    got = packed.view(np.uint32).view(np.uint8).reshape(-1, 4)
+    x = np.nan_to_num(rgb * np.float32(2.0), nan=0.0, posinf=LUT_HI, neginf=0.0)  # (NaN, ±inf as the clamp takes them)
+    bits = np.clip(x, np.float32(LUT_LO), np.float32(LUT_HI)).view(np.uint32)
+    want = tonemap_table()[(bits >> (23 - LUT_BITS)).astype(np.int64) - LUT_BIAS]
+    assert np.array_equal(got[:, :3], want) and np.all(got[:, 3] == 255)
+    assert list(got[:3, :3].ravel()) == [0, 0, 0, 255, 0, 0, 0, 255, 255]  # 0, −1, NaN, inf, −inf, 1e-30, …
