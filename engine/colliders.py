@@ -57,6 +57,7 @@ from .collider_projected import ProjectedShapes
 from .fieldio import ColumnWriter
 from .geometry.shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, box_local, quat_normalize, rotate,
                               spun, turn, turned)
+from .launch import data_oriented
 from .ode.events import contact_band
 
 __all__ = ["ColliderSpec", "Colliders", "ColliderView", "PLANE", "SPHERE", "BOX", "CAPSULE", "KINDS", "OWNERS"]
@@ -115,7 +116,7 @@ class ColliderSpec:
         return spun(q, self.angular_velocity, t) if any(float(c) != 0.0 for c in self.angular_velocity) else q
 
 
-@ti.data_oriented
+@data_oriented
 class Colliders(ShapePoses, ProjectedShapes):
     """Fields for a fixed list of shapes and the ``ti.func`` s that find and resolve contacts.
 
@@ -398,7 +399,7 @@ _SHARED = ("specs", "count", "event_count", "dtype", "kinds", "spins", "rotating
            "_band", "_np")
 
 
-@ti.data_oriented
+@data_oriented
 class ColliderView(Colliders):
     """A :class:`Colliders` table as points that keep ``offset`` m from its surfaces meet it (a
     soft body's nodes, ``offset`` its thickness: a sphere grows by it, a plane moves out along

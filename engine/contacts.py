@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from .launch import data_oriented
+
 
 @dataclass
 class Contacts:
@@ -143,7 +145,7 @@ def drain(count, slot, collider, pos, normal, speed, time, capacity: int, names=
     return Contacts(*cols, tt[order], sl[order], tuple(names), max(0, n - k), grp, **parties)
 
 
-@ti.data_oriented
+@data_oriented
 class ContactBuffer:
     """Device-side contact records, for a particle pool (its integrator's ``contact_log``) and a
     soft body's nodes alike: ``capacity`` rows; ``enabled`` False when nothing records."""

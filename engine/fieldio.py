@@ -18,8 +18,10 @@ import numpy as np
 import taichi as ti
 from taichi.lang.matrix import MatrixField
 
+from .launch import data_oriented
 
-@ti.data_oriented
+
+@data_oriented
 class ColumnWriter:
     """Writes rows (n, C) into ``fields`` (shape (≥ n,), all of dtype ``dtype`` — f32, f64 or i32 —
     in order: column
@@ -60,7 +62,7 @@ class ColumnWriter:
             _write_rows(self, rows.reshape(-1), len(rows))
 
 
-@ti.data_oriented
+@data_oriented
 class WriterGroup:
     """One kernel for several :class:`ColumnWriter` (those built with ``group=`` this group, all
     before its first launch: the kernel is compiled for them). A writer's write launches that

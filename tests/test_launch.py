@@ -240,3 +240,40 @@ def test_kernels_bind_on_the_llvm_backends_only(monkeypatch, arch, binds):
         assert _mix(a, v, want, k, 1, 2.0) == fk(a, v, got, k, 1, 2.0)
         assert np.array_equal(got, want)
     assert bool(fk._bound) is binds
+
+
+def test_data_oriented_reads_attributes_the_plain_way_and_still_binds_kernel_methods():
+    """engine.launch.data_oriented: a class without kernel methods gets Python's own attribute
+    look-up (not Taichi's per-read function) and is still a kernel's template argument; in a class
+    with a kernel method only that name goes through Taichi's look-up, which binds it (a call
+    writes the object's field), while a property and plain attributes read as usual."""
+    from engine.launch import data_oriented
+
+    @data_oriented
+    class Plain:
+        def __init__(self):
+            self.n = 3
+            self.f = ti.field(ti.i32, ())
+
+    @data_oriented
+    class WithKernel:
+        def __init__(self):
+            self.n = 5
+            self.f = ti.field(ti.i32, ())
+
+        @property
+        def twice(self):
+            return 2 * self.n
+
+        @ti.kernel
+        def fill(self, k: ti.i32):
+            self.f[None] = k * self.n
+
+    p, w = Plain(), WithKernel()
+    assert Plain.__getattribute__ is object.__getattribute__
+    _with_object(p, 7)
+    assert p.f[None] == 21
+    assert WithKernel.__getattribute__ is not object.__getattribute__
+    w.fill(4)
+    assert w.f[None] == 20 and w.twice == 10 and w.n == 5
+    assert type(w.fill).__name__ != "method"  # (Taichi's binding, not a plain bound function)

@@ -25,6 +25,7 @@ import taichi as ti
 
 from ..geometry.colouring import greedy_colors, schedule, serial_sweep
 from . import terms
+from ..launch import data_oriented
 
 KINDS = {"bending": 4, "area": 3, "volume": 4, "elastic": 4}
 _KIND_ID = {"bending": 0, "area": 1, "volume": 2, "elastic": 3}
@@ -216,7 +217,7 @@ def _project_range(g: ti.template(), X: ti.template(), w: ti.template(), h: ti.f
         _project_one(g, X, w, hh, q)
 
 
-@ti.data_oriented
+@data_oriented
 class ElementGroup:
     """One term over elements. ``nodes``: (E, k) int node indices; ``positions``: (N, 3) rest
     positions (m) that define θ₀ / A₀ / V₀ / D_m; ``stiffness``: the kind's constant (see the module

@@ -19,6 +19,8 @@ the nodes, so a body in a scene without drag keeps its bytes.
 import numpy as np
 import taichi as ti  # (no __future__ annotations: Taichi reads the funcs' annotations)
 
+from ..launch import data_oriented
+
 
 @ti.func
 def attractor_accel(x, pos, strength, radius):
@@ -40,7 +42,7 @@ def vortex_accel(x, pos, axis, strength, radius):
     return strength * (2.0 * q / (1.0 + q * q)) * axis.cross(rho_v / rho)
 
 
-@ti.data_oriented
+@data_oriented
 class PointForces:
     """``gravity``, ``wind``: 0-d vector fields (the control's; m/s², m/s); ``drag``: k (1/s),
     compiled in only when positive (``use_drag``); ``attractors``, ``vortices``: the config's

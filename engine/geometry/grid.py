@@ -27,11 +27,12 @@ that walk once, for gathers that run several times over the same neighbourhood.
 import taichi as ti
 
 from .sizing import BLOCK, MAX_CELL_INDEX, NEIGHBOURS, table_size
+from ..launch import data_oriented
 
 _P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003, "Optimized spatial hashing"
 
 
-@ti.data_oriented
+@data_oriented
 class HashGrid:
     """The grid over ``capacity`` slots with cells of side ``cell`` metres.
 
@@ -168,7 +169,7 @@ class HashGrid:
                 "max_bucket": int(self.max_bucket[None]), "table": self.table}
 
 
-@ti.data_oriented
+@data_oriented
 class NeighbourLists:
     """Each member slot's neighbours listed once from a :class:`HashGrid`'s walk and reused by
     later gathers while they hold (Macklin & Müller 2013, Algorithm 1: "find neighbouring

@@ -18,6 +18,7 @@ from ..fieldio import ColumnWriter, WriterGroup
 from . import local_space as _local
 from . import spawn as _k
 from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
+from ..launch import data_oriented
 
 CHUNKS = 256  # most slices a sub-emitter pass splits a parent segment into (pass 2 sums ≤ 256 counts)
 CHUNK_MIN = 2048  # ... of at least this many slots each
@@ -56,7 +57,7 @@ class EmitterClock:
         return out
 
 
-@ti.data_oriented
+@data_oriented
 class Emitters:
     """Per-emitter parameters as fields (shape (rows,): one row per emitter, spare rows zero),
     ring heads and serial counters (fields, so kernels and Python share one truth) and the

@@ -16,7 +16,7 @@ stepper, forces and colliders are compile-time parts of it), warp.sim style; the
 import taichi as ti
 
 from ..contacts import ContactBuffer
-from ..launch import fast
+from ..launch import data_oriented, fast
 from ..ode.events import doubling_error, fixed_error, located_step
 from ..ode.steppers import doubling_step, is_finite, make_step, scaled_error
 
@@ -58,7 +58,7 @@ def particle_derivative(accel):
 
 
 
-@ti.data_oriented
+@data_oriented
 class ParticleIntegrator:
     """The compiled parts of a scene's particle step and what the step reports.
 

@@ -37,7 +37,7 @@ import numpy as np
 import taichi as ti
 
 from ..geometry.grid import HashGrid, NeighbourLists
-from ..launch import fast_method
+from ..launch import data_oriented, fast_method
 from . import pm
 from .fluid import FLUID_EPS, S_CORR_DQ, S_CORR_K, FluidTerms, lattice_constants, poly6
 from .pm import AUTO_DIRECT
@@ -52,7 +52,7 @@ GRANULAR_RELAX = 0.5  # Jacobi relaxation: a fixed factor (not 1/contact count: 
 GRANULAR_MAX_SPEED = 0.1
 REPEL = 0.25  # fraction of a repel overlap removed per step (soft)
 GRAIN_SKIN = 0.6  # the neighbour lists' skin (a fraction of a cell) without fluid members
-@ti.data_oriented
+@data_oriented
 class Interactions(FluidTerms):
     """The interactions of one scene's pool (built once; kernels compiled for the kinds present).
 

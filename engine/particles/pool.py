@@ -19,6 +19,7 @@ from typing import List
 import taichi as ti
 
 from .capacity import emitter_capacity, pool_sizes  # noqa: F401  (re-exported)
+from ..launch import data_oriented
 
 
 @dataclass
@@ -63,7 +64,7 @@ PARTICLE_FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_lif
                    "particle_emitter", "particle_rand")
 
 
-@ti.data_oriented
+@data_oriented
 class ParticleState:
     """State of every slot, shape (capacity,):
 

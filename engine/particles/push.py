@@ -22,8 +22,10 @@ None otherwise and the particle step is the same code as before.
 import numpy as np
 import taichi as ti
 
+from ..launch import data_oriented
 
-@ti.data_oriented
+
+@data_oriented
 class Pusher:
     """Per-slot push records (shape (capacity,)): ``push_body`` (i32, the rigid body's index, −1:
     none yet), ``push_dv`` (f32 (3,), m/s: Σ Δv of the slot's particle over its contacts with that

@@ -15,6 +15,7 @@ import taichi as ti
 
 from ..geometry.colouring import greedy_colors, schedule
 from .topology import Topology
+from ..launch import data_oriented
 
 
 def csr_adjacency(n_nodes: int, edges: np.ndarray):
@@ -34,7 +35,7 @@ def edge_coloring(n_nodes: int, edges: np.ndarray):
     return greedy_colors(n_nodes, edges)
 
 
-@ti.data_oriented
+@data_oriented
 class SpringModel:
     """Fields (dtype is f32 for the engine; f64 for tests):
 
@@ -106,7 +107,7 @@ class SpringModel:
         return self.top.masses[~self.pinned_mask]
 
 
-@ti.data_oriented
+@data_oriented
 class SpringState:
     """node_pos (m) and node_vel (m/s), one vector per node."""
 

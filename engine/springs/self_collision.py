@@ -12,11 +12,12 @@ colliders are applied after this, by the body's own step (they win over self-con
 import taichi as ti
 
 from ..geometry.grid import HashGrid
+from ..launch import data_oriented
 
 RELAX = 1.0  # Jacobi relaxation: a fixed factor (not 1/contact count) keeps each pair antisymmetric
 
 
-@ti.data_oriented
+@data_oriented
 class SelfCollision:
     """``model``/``state``: the body's SpringModel and SpringState; ``thickness`` in m."""
 
