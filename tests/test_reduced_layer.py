@@ -408,3 +408,26 @@ def test_full_rows_mark_every_row_a_sprite_drew_in(config):
             marked += bit
             unmarked += 1 - bit
     assert marked > 0 and unmarked > 0
+
+
+def test_coarse_corner_is_the_bilinear_quad_at_half_scale():
+    """``co_corner`` (integer operations) gives exactly ``lo_quad(x, y, 0.5, ...)``'s texels and
+    fractions for every reduced texel of levels of odd and even sizes, edges included."""
+    import taichi as ti
+
+    from engine.render.upsample import co_corner, lo_quad
+
+    @ti.kernel
+    def both(out: ti.types.ndarray(dtype=ti.f32, ndim=3), Wc: ti.i32, Hc: ti.i32):
+        for y, x in ti.ndrange(out.shape[0], out.shape[1]):
+            a = ti.Vector(lo_quad(x, y, 0.5, Wc, Hc))
+            b = ti.Vector(co_corner(x, y, Wc, Hc))
+            for c in ti.static(range(6)):
+                out[y, x, c] = a[c]
+                out[y, x, 6 + c] = b[c]
+
+    for Wc, Hc in ((80, 45), (7, 4), (1, 1)):
+        out = np.zeros((2 * Hc + 1, 2 * Wc + 1, 12), np.float32)  # (one past a level made of whole texel pairs)
+        both(out, Wc, Hc)
+        assert np.array_equal(out[..., :6], out[..., 6:]), (Wc, Hc)
+        assert set(np.unique(out[..., 4])) == {0.25, 0.75}
