@@ -354,14 +354,16 @@ def test_the_kept_pair_list_gives_the_broad_phases_pairs_at_every_step():
     assert built < 100  # kept most steps (rebuilt on a far jump, a NaN, or after enough drift)
 
 
-@pytest.mark.parametrize("table", ["dense", "sparse"])
+@pytest.mark.parametrize("table", ["dense", "sparse", "all pairs"])
 def test_the_grid_broad_phase_finds_the_sweeps_pairs_in_the_same_order(table, monkeypatch):
     # the broad phase (a uniform grid) gives exactly the sorted sweep's pairs and order, on
     # clouds, flat layers, coincident bodies and a lattice (where the sweep lists every slab),
-    # through its dense table of cells and through its binary search among occupied cells
+    # through its dense table of cells and through its binary search among occupied cells — and
+    # so does its test of every pair at once (what it does for a few bodies), here at every size
     from engine.rigid import broad
     from engine.rigid.broad import broad_phase, sweep_phase
 
+    monkeypatch.setattr(broad, "ALL_PAIRS", 10 ** 9 if table == "all pairs" else 0)
     if table == "sparse":
         monkeypatch.setattr(broad, "DENSE_CELLS", -10 ** 9)
 
