@@ -277,3 +277,51 @@ def test_data_oriented_reads_attributes_the_plain_way_and_still_binds_kernel_met
     w.fill(4)
     assert w.f[None] == 20 and w.twice == 10 and w.n == 5
     assert type(w.fill).__name__ != "method"  # (Taichi's binding, not a plain bound function)
+
+
+def test_data_oriented_binds_static_kernels_and_a_subclass_s_own():
+    """Kernels the class body does not hold as plain methods still go through Taichi's look-up:
+    a static kernel, and a kernel an undecorated subclass adds (to a base with kernels and to
+    one without), whose other attributes read the plain way."""
+    from engine.launch import data_oriented
+
+    @data_oriented
+    class Static:
+        @staticmethod
+        @ti.kernel
+        def twice(x: ti.i32) -> ti.i32:
+            return 2 * x
+
+    @data_oriented
+    class Bare:
+        def __init__(self):
+            self.f = ti.field(ti.i32, ())
+
+    class Grown(Bare):
+        @ti.kernel
+        def fill(self, k: ti.i32):
+            self.f[None] = k + 1
+
+    @data_oriented
+    class WithKernel:
+        def __init__(self):
+            self.f = ti.field(ti.i32, ())
+
+        @ti.kernel
+        def fill(self, k: ti.i32):
+            self.f[None] = k
+
+    class More(WithKernel):
+        @ti.kernel
+        def more(self, k: ti.i32):
+            self.f[None] = 3 * k
+
+    assert Static().twice(4) == 8
+    g = Grown()
+    g.fill(6)
+    assert g.f[None] == 7 and Bare.__getattribute__ is object.__getattribute__
+    m = More()
+    m.more(5)
+    assert m.f[None] == 15
+    m.fill(2)
+    assert m.f[None] == 2

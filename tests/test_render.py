@@ -189,7 +189,11 @@ def test_tone_map_table_samples_aces_and_srgb():
     from engine.render.composite import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, tonemap, tonemap_bins, tonemap_table
 
     table, (lo, hi) = tonemap_table(), tonemap_bins()
-    assert lo[0] == 2.0 ** -17 and hi[-1] == 8.0 and np.array_equal(lo[1:], hi[:-1])
+    assert lo[0] == 2.0 ** -17 and hi[-1] == 8.0 and np.all(np.diff(lo) > 0)
+    # the clamp's two ends read the first and the last entry, and a bin's edges stay in it
+    ends = np.float32([LUT_LO, LUT_HI, np.nextafter(np.float32(LUT_LO), np.float32(1)), 1.0])
+    index = (ends.view(np.uint32) >> (23 - LUT_BITS)).astype(np.int64) - LUT_BIAS
+    assert list(index[:3]) == [0, len(table) - 1, 0] and lo[index[3]] == 1.0
     assert np.all(tonemap(lo) <= table) and np.all(table <= tonemap(hi))
     assert table[0] == 0 and table[-1] == 255 and np.all(np.diff(table) >= 0)
     x = np.exp(np.random.default_rng(5).uniform(np.log(1e-6), np.log(8.0), 200_000)).astype(np.float32)
@@ -200,27 +204,32 @@ def test_tone_map_table_samples_aces_and_srgb():
 
 
 def test_the_kernels_tone_map_by_the_table():
-    """``pack`` (through ``pack_background``: a background alone, exposure 2) reads the table
-    entry of each channel's bin — bit for bit what NumPy finds for the same f32 values — with
-    below the first bin, negatives and NaN black, past 8 and +inf white, and alpha 255."""
+    """``pack`` (through ``pack_background``: a background alone, at exposure 1 and 2) reads the
+    table entry of each channel's bin — bit for bit what NumPy finds for the same f32 values —
+    with below the first bin (−0, a subnormal), negatives and NaN black, from 8 on and +inf white,
+    the table's two ends exactly, and alpha 255."""
     import taichi as ti
 
     from engine.render.composite import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, build_composite_kernels, tonemap_table
 
     k = build_composite_kernels(True, True)
     rng = np.random.default_rng(11)
-    special = np.float32([0.0, -1.0, np.nan, np.inf, -np.inf, 1e-30, LUT_LO, LUT_HI, 8.0, 1e6, 0.5, 3.6])
+    special = np.float32([0.0, -1.0, np.nan, np.inf, -np.inf, 1e-30, LUT_LO, LUT_HI, 8.0, -0.0, 1e-40, 3.6])
     rgb = np.concatenate([special, np.exp(rng.uniform(np.log(1e-7), np.log(20.0), 3 * 4096 - len(special)))])
     rgb = rgb.astype(np.float32).reshape(-1, 3)
     bg = np.concatenate([rgb, np.ones((len(rgb), 1), np.float32)], axis=1)
     W, H = 64, len(bg) // 64
     arr = ti.ndarray(ti.types.vector(4, ti.f32), len(bg))
     arr.from_numpy(bg)
-    packed = np.zeros(len(bg) // 2, np.uint64)
-    k["pack_background"](arr, packed, W, H, 0, 0, W, H, 2.0, 0)
-    got = packed.view(np.uint32).view(np.uint8).reshape(-1, 4)
-    x = np.nan_to_num(rgb * np.float32(2.0), nan=0.0, posinf=LUT_HI, neginf=0.0)  # (NaN, ±inf as the clamp takes them)
-    bits = np.clip(x, np.float32(LUT_LO), np.float32(LUT_HI)).view(np.uint32)
-    want = tonemap_table()[(bits >> (23 - LUT_BITS)).astype(np.int64) - LUT_BIAS]
-    assert np.array_equal(got[:, :3], want) and np.all(got[:, 3] == 255)
-    assert list(got[:3, :3].ravel()) == [0, 0, 0, 255, 0, 0, 0, 255, 255]  # 0, −1, NaN, inf, −inf, 1e-30, …
+    table = tonemap_table()
+    for exposure in (1.0, 2.0):
+        packed = np.zeros(len(bg) // 2, np.uint64)
+        k["pack_background"](arr, packed, W, H, 0, 0, W, H, exposure, 0)
+        got = packed.view(np.uint32).view(np.uint8).reshape(-1, 4)
+        with np.errstate(invalid="ignore", over="ignore"):
+            x = np.nan_to_num(rgb * np.float32(exposure), nan=0.0, posinf=LUT_HI, neginf=0.0)  # (as the clamp takes them)
+        bits = np.clip(x, np.float32(LUT_LO), np.float32(LUT_HI)).view(np.uint32)
+        want = table[(bits >> (23 - LUT_BITS)).astype(np.int64) - LUT_BIAS]
+        assert np.array_equal(got[:, :3], want) and np.all(got[:, 3] == 255), exposure
+    # (exposure 2 here) 0, −1, NaN | inf, −inf, 1e-30 | 2^-16, 16, 16 | −0, 1e-40
+    assert list(got[:3, :3].ravel()) == [0, 0, 0, 255, 0, 0, 0, 255, 255] and list(got[3, :2]) == [0, 0]

@@ -41,7 +41,7 @@ from .sprites import TILE
 from .upsample import ND_F, ND_I1, ND_V4, lo_edge, lo_near, lo_rows, lo_sample, tile_edge_rows
 
 # the tone-map table: bins of f32 linear values by their bits (exponent and top LUT_BITS mantissa
-# bits: 1,024 bins an octave, each 0.1 % wide) over [2^LUT_MIN_EXP, 8): below, black (ACES·sRGB
+# bits: 1,024 bins an octave, each ≤ 0.1 % wide) over [2^LUT_MIN_EXP, 8): below, black (ACES·sRGB
 # there is < 0.01 of an 8-bit step); above, white (ACES reaches 1 at x ≈ 7.24)
 LUT_BITS = 10
 LUT_MIN_EXP = -17
@@ -106,12 +106,16 @@ def _build(uses_add: bool, uses_alpha: bool):
     # did not: the composite of debris.toml at 1280×720, 81 % of its tiles reduced-layer-only,
     # 12.4 → 6.8 ms)
     lut = ti.field(ti.u8, shape=LUT_SIZE)
+    llvm = runtime._arch_in_use() in ("cpu", "cuda")  # (LLVM's max returns the operand not NaN)
     lut.from_numpy(tonemap_table().astype(np.uint8))
 
     @ti.func
     def tone(x):
         """One channel's 8-bit value: its table bin by its bits (``tonemap_table``)."""
-        return ti.cast(lut[ti.cast(ti.bit_cast(x, ti.u32) >> (23 - LUT_BITS), ti.i32) - LUT_BIAS], ti.u32)
+        i = ti.cast(ti.bit_cast(x, ti.u32) >> (23 - LUT_BITS), ti.i32) - LUT_BIAS
+        if ti.static(not llvm):  # a NaN past the clamp (a max that may return it) still in the table
+            i = ti.min(i, LUT_SIZE - 1)  # (on CPU and CUDA it cannot bind: 3–8 % of the composite)
+        return ti.cast(lut[i], ti.u32)
 
     @ti.func
     def pack(c, alpha, bgra):
@@ -119,7 +123,8 @@ def _build(uses_add: bool, uses_alpha: bool):
         bytes R, G, B, A in memory (``bgra`` 0) or B, G, R, A (windowing systems' order)."""
         # (ti.math.clamp's own min(max) written out: it is a ti.func, parsed and transformed at
         # each of pack's ~20 call sites in the composite, at every start. A NaN takes the lower
-        # bound, black, as before: LLVM's max returns the operand that is not NaN)
+        # bound, black, as before, on the LLVM backends (CPU, CUDA): their max returns the operand
+        # that is not NaN)
         v = ti.min(LUT_HI, ti.max(LUT_LO, c))
         r, g, b = tone(v[0]), tone(v[1]), tone(v[2])
         a = ti.cast(ti.min(255.0, alpha * 255.0 + 0.5), ti.u32)
