@@ -232,14 +232,17 @@ def test_cached_edge_flags_follow_a_moving_body():
     s.close()
 
 
-def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_drew():
+@pytest.mark.parametrize("edge", [False, True])
+def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_drew(edge):
     """``composite_tiles`` shows a tile row whose two reduced rows are marked empty
     (``lo_rows``' ``row_empty``) as the packed background — except in a tile a soft or rigid body
     drew in (``dirty``), whose background is the frame's own (bodies drawn in), not the packed
     one: there it composites as if unmarked. A 32 × 32 image (2 × 2 tiles) at s = 1/4, the
     reduced layer empty, one reduced tile drawn (every tile is near it), no sprite at full
     resolution; the packed background made from other colours than the frame's, so each copy
-    shows."""
+    shows. ``edge``: the reduced depths alternate 1 and 10 along x, so every pixel's upsample is
+    bilateral (the horizon's band): an empty row is the packed background there too, and
+    computed it is the frame's background exactly (the bilateral mean of empty texels is empty)."""
     import taichi as ti
 
     from engine.render.composite import build_composite_kernels
@@ -266,12 +269,16 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
     rows = nd(v4, np.tile(np.float32([0, 0, 0, 1]), (Hl * W, 1)))
     dirty = np.int32([1, 0, 0, 0])  # a body drew in tile 0
 
+    depth = np.ones(LO + Wl * Hl, np.float32)
+    if edge:
+        depth[LO:] = np.tile(np.float32([1.0, 10.0]), Wl * Hl // 2)
+
     def composite(row_empty_value):
         out = np.zeros(px, np.uint32)
         edges = nd(ti.i32, np.full(TX * TY, -1, np.int32))
         k["composite_tiles"](np.zeros(TX * TY, np.int32), np.zeros(TX * TY, np.int32), acc, acc, rows,
                              np.full(Hl * TX, row_empty_value, np.int32), nd(v4, frame_bg),
-                             nd(ti.f32, np.ones(LO + Wl * Hl, np.float32)), packed, out,
+                             nd(ti.f32, depth), packed, out,
                              np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,
                              np.zeros(TX * TY * 16, np.int32), 1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s,
                              1, 1.0, 0.9, 0)
@@ -283,6 +290,9 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
     np.testing.assert_array_equal(marked[body], computed[body])
     np.testing.assert_array_equal(marked[~body], packed.view(np.uint32).reshape(H, W)[~body])
     assert (computed[~body] != marked[~body]).mean() > 0.9  # (the copy is seen)
+    own = np.zeros(px // 2, np.uint64)  # the frame's own background packed: the empty layer over it
+    k["pack_background"](nd(v4, frame_bg), own, W, H, 0, 0, W, H, 1.0, 0)
+    np.testing.assert_array_equal(computed, own.view(np.uint32).reshape(H, W))
 
 
 @pytest.mark.parametrize("schedule", ["tiles", "pixels"])

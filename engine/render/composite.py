@@ -279,15 +279,21 @@ def _build(uses_add: bool, uses_alpha: bool):
                     if edge != 0:
                         mask = edge_rows[t * TILE + y - py0]
                     full_here = (drawn >> (y - py0)) & 1
-                    if full_here == 0 and near != 0 and mask == 0:
+                    if (full_here == 0 and near != 0 and dirty[t] == 0 and row_empty[ja * TX + tx] != 0
+                            and row_empty[jb * TX + tx] != 0):
+                        # the reduced layer alone, both its rows the empty layer here
+                        # (``row_empty``: upsample.lo_rows), and no body drew in the tile (``bgc``
+                        # is then the frame's, bodies drawn in, not what was packed): the packed
+                        # background, bit for bit — also where the upsample is bilateral (``mask``):
+                        # its four texels are then the empty layer, whose weighted mean is itself
+                        # (RGB 0·w = 0; T: Σ w·1 / Σ w, one sum over the other). The horizon's
+                        # band of bilateral rows, where the receding floor's depth grows by more
+                        # than 10 % a texel, is mostly such rows (flames.toml at 1280×720: three
+                        # rows of tiles, 56k pixels)
+                        background_row(bg_packed, out, out64, copy, y, px0, px1, W)
+                    elif full_here == 0 and near != 0 and mask == 0:
                         # the common case under smoke: the reduced layer alone, bilinear
-                        if (dirty[t] == 0 and row_empty[ja * TX + tx] != 0
-                                and row_empty[jb * TX + tx] != 0):
-                            # both rows are the empty layer here (``row_empty``: upsample.lo_rows)
-                            # and no body drew in the tile (``bgc`` is then the frame's, bodies
-                            # drawn in, not what was packed): the packed background, bit for bit
-                            background_row(bg_packed, out, out64, copy, y, px0, px1, W)
-                        elif px1 - px0 == TILE - 1 and mode == 0:
+                        if px1 - px0 == TILE - 1 and mode == 0:
                             # a whole row of the tile, opaque RGBA (the usual mode) with the mode a
                             # constant: its tests and swaps folded away (a branch per pixel cost
                             # the unrolled row ~1 ms a frame at 1280×720; a second unrolled copy
