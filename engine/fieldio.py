@@ -74,12 +74,11 @@ class WriterGroup:
 
     def __init__(self):
         self.writers, self._held, self._holding, self._launched = [], {}, 0, False
-        self._slot = {}  # id(writer) → its index
 
     def _add(self, writer) -> None:
         if self._launched:
             raise RuntimeError("WriterGroup: a writer added after the group's kernel was compiled")
-        self._slot[id(writer)] = len(self.writers)
+        writer.slot = len(self.writers)  # (its place in the group's kernel)
         self.writers.append(writer)
 
     @contextlib.contextmanager
@@ -99,9 +98,9 @@ class WriterGroup:
 
     def _put(self, writer, rows) -> None:
         if self._holding:
-            self._held[self._slot[id(writer)]] = rows
+            self._held[writer.slot] = rows
         else:
-            self._launch({self._slot[id(writer)]: rows})
+            self._launch({writer.slot: rows})
 
     def _launch(self, parts) -> None:
         if not self._launched:

@@ -26,7 +26,7 @@ import taichi as ti
 def install() -> None:
     """Taichi's front end runs on every kernel at every start, also when the kernel then comes
     from the offline cache, and spends much of it on text only a failing kernel shows. Each
-    piece below gives the same text or answer as Taichi's own, sooner (tests/test_startup.py).
+    piece below gives the same text or answer as Taichi's own, sooner (tests/test_front_end.py).
     (Private Taichi APIs: where one is not there, it is left alone.)
 
     Taichi formats a node's source position (file, line, the line with a caret under the node,
@@ -84,7 +84,7 @@ def install() -> None:
     # every loaded module (~0.6 ms a decoration, ~0.1 s of a start): read the line directly
     taichis = getattr(kernel_impl, "_inside_class", None)
     if taichis not in (None, _inside_class) and hasattr(kernel_impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES"):
-        _inside_class.taichis = taichis  # (kept for tests/test_startup.py)
+        _inside_class.taichis = taichis  # (kept for tests/test_front_end.py)
         kernel_impl._inside_class = _inside_class
     # and a function's source lines and file, looked up (inspect: tokenize, getmodule) each
     # time a kernel is built or a ti.func inlined, once a function (weakly held: a scene's
@@ -107,7 +107,7 @@ class _QuickWrapper(textwrap.TextWrapper):
     """``textwrap.TextWrapper`` for Taichi's front end: the same lines, quicker. A printable line
     that fits the width (less one trailing newline, as ``inspect.getsourcelines`` gives: wrapping
     turns it into a trailing blank) is one line as it is, less trailing spaces, none if it is all
-    spaces — what ``wrap`` returns for it (tests/test_startup.py compares the two); any other
+    spaces — what ``wrap`` returns for it (tests/test_front_end.py compares the two); any other
     text is wrapped by ``TextWrapper`` once and kept (Taichi builds a wrapper per call)."""
 
     _kept: dict = {}

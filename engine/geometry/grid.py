@@ -26,8 +26,8 @@ that walk once, for gathers that run several times over the same neighbourhood.
 
 import taichi as ti
 
-from .sizing import BLOCK, MAX_CELL_INDEX, NEIGHBOURS, table_size
 from ..launch import data_oriented
+from .sizing import BLOCK, MAX_CELL_INDEX, NEIGHBOURS, table_size
 
 _P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003, "Optimized spatial hashing"
 

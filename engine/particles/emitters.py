@@ -15,10 +15,10 @@ import numpy as np
 import taichi as ti
 
 from ..fieldio import ColumnWriter, WriterGroup
+from ..launch import data_oriented
 from . import local_space as _local
 from . import spawn as _k
 from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
-from ..launch import data_oriented
 
 CHUNKS = 256  # most slices a sub-emitter pass splits a parent segment into (pass 2 sums ≤ 256 counts)
 CHUNK_MIN = 2048  # ... of at least this many slots each

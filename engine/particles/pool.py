@@ -18,8 +18,8 @@ from typing import List
 
 import taichi as ti
 
-from .capacity import emitter_capacity, pool_sizes  # noqa: F401  (re-exported)
 from ..launch import data_oriented
+from .capacity import emitter_capacity, pool_sizes  # noqa: F401  (re-exported)
 
 
 @dataclass
