@@ -11,15 +11,11 @@ from engine.api import ParticleScene
 from engine.render.resolution import particle_scale
 
 
-@pytest.mark.parametrize("per_pixel", [False, True])
 @pytest.mark.parametrize("k", [2, 4])
-def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_pixel, k):
-    """``lo_rows``, both loop shapes (a thread a row walking texel pairs: the CPU's; a thread a
-    texel: the GPU's), at both reduced scales (1/k): a needed row holds the reduced layer
-    interpolated along x (a NumPy reference), a row no drawn reduced tile reaches keeps what
-    it held. The CPU's also marks each needed row's tile columns whose values are all the empty
-    layer (0, 0, 0, 1), exactly those (texel runs set empty in the middle and at the right edge,
-    where the last tile column is cut short)."""
+def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(k):
+    """``lo_rows`` (the per-pixel schedule's), at both reduced scales (1/k): a needed row holds
+    the reduced layer interpolated along x (a NumPy reference), a row no drawn reduced tile
+    reaches keeps what it held."""
     import taichi as ti
 
     from engine.render.sprites import TILE
@@ -33,8 +29,6 @@ def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_p
     rng = np.random.default_rng(5)
     lo_np = rng.random((W * H + Wl * Hl, 4), dtype=np.float32)
     layer = lo_np[W * H:].reshape(Hl, Wl, 4)  # (a view)
-    layer[:, 20:40] = layer[:, Wl - 10:] = (0.0, 0.0, 0.0, 1.0)
-    layer[17, 30] = (0.0, 0.0, 0.0, 0.999)  # not empty: its tile columns in row 17 are not
     touched_np = np.zeros(TXl * TYl, np.int32)
     touched_np[1 * TXl + 1] = 1  # one drawn reduced tile: reduced rows 16..31
     lo = ti.ndarray(ti.types.vector(4, ti.f32), lo_np.shape[0])
@@ -43,27 +37,77 @@ def test_reduced_rows_are_interpolated_only_where_the_composite_reads_them(per_p
     touched.from_numpy(touched_np)
     rows = ti.ndarray(ti.types.vector(4, ti.f32), Hl * W)
     rows.fill(-7.0)
-    TX = tiles_for(W, H)[0]
-    row_empty = ti.ndarray(ti.i32, Hl * TX)
-    row_empty.fill(-1)
-    lo_rows(lo, rows, row_empty, W, H, Wl, Hl, s, touched, TXl, TYl, R, per_pixel, k)
+    lo_rows(lo, rows, W, H, Wl, Hl, s, touched, TXl, TYl, R)
     got = rows.to_numpy().reshape(Hl, W, 4)
+    needed = np.zeros(Hl, bool)
+    needed[16 - R:31 + R + 1] = True  # the rows within R of the drawn tile's
+    np.testing.assert_allclose(got[needed], _rows_along_x(layer, W, s)[needed], rtol=1e-6, atol=1e-6)
+    assert (got[~needed] == -7.0).all()
+
+
+def _rows_along_x(layer, W, s):
+    """The reduced layer's rows (Hl, Wl, 4) interpolated along x at full-resolution columns
+    0..W − 1 (``lo_quad``'s x half, in NumPy)."""
+    Wl = layer.shape[1]
     u = (np.arange(W) + 0.5) * s - 0.5
     i0 = np.floor(u).astype(int)
     fx = (u - i0)[:, None]
-    want = (1 - fx) * layer[:, np.clip(i0, 0, Wl - 1)] + fx * layer[:, np.clip(i0 + 1, 0, Wl - 1)]
-    needed = np.zeros(Hl, bool)
-    needed[16 - R:31 + R + 1] = True  # the rows within R of the drawn tile's
-    np.testing.assert_allclose(got[needed], want[needed], rtol=1e-6, atol=1e-6)
-    assert (got[~needed] == -7.0).all()
-    if not per_pixel:
-        flags = row_empty.to_numpy().reshape(Hl, TX)
-        empty = np.pad((want == (0.0, 0.0, 0.0, 1.0)).all(-1), ((0, 0), (0, TX * TILE - W)),
-                       constant_values=True).reshape(Hl, TX, TILE).all(-1)
-        assert empty[needed][:, -1].all() and empty[needed][:, :-1].any(axis=1).sum() >= needed.sum() - 1
-        assert not empty[17].all() and empty[16].sum() > empty[17].sum()
-        np.testing.assert_array_equal(flags[needed], empty[needed])
-        assert (flags[~needed] == -1).all()
+    return (1 - fx) * layer[:, np.clip(i0, 0, Wl - 1)] + fx * layer[:, np.clip(i0 + 1, 0, Wl - 1)]
+
+
+@pytest.mark.parametrize("k", [2, 4])
+def test_the_composite_reads_the_reduced_rows_as_the_bilinear_upsample(k):
+    """What the CPU's composite reads of a reduced row at each full-resolution column: per pixel
+    (``row_lerp``) and a whole tile row at once (``row_place``'s texels and fractions, as
+    ``reduced_row`` unrolls them) equal the bilinear upsample's x half bit for bit, and equal each
+    other, at both scales and at a width that cuts the last tile short; ``empty_rows`` marks
+    exactly the rows whose texels read for a tile's columns are all the empty layer (runs set
+    empty in the middle and at the right edge, one texel there made not quite empty)."""
+    import taichi as ti
+
+    from engine.render.sprites import TILE
+    from engine.render.targets import reduced_size
+    from engine.render.upsample import empty_rows, row_lerp, row_place
+
+    W, H, s = 253, 64, 1.0 / k
+    Wl, Hl = reduced_size(W, H, s)
+    TX = -(-W // TILE)
+    rng = np.random.default_rng(7)
+    layer = rng.random((Hl, Wl, 4), dtype=np.float32)
+    last = ((TX - 1) * TILE - k // 2) // k  # the first texel the last tile column reads
+    layer[:, 20 // k:(20 // k) + 40 // k] = layer[:, last:] = (0.0, 0.0, 0.0, 1.0)
+    layer[5, Wl - 1] = (0.0, 0.0, 0.0, 0.999)  # not empty: row 5's last tile column is not
+    lo = ti.ndarray(ti.types.vector(4, ti.f32), Hl * Wl)
+    lo.from_numpy(layer.reshape(-1, 4))
+    per_pixel = ti.ndarray(ti.types.vector(4, ti.f32), Hl * W)
+    whole = ti.ndarray(ti.types.vector(4, ti.f32), Hl * TX * TILE)
+    flags = ti.ndarray(ti.i32, Hl * TX)
+
+    @ti.kernel
+    def read(lo: ti.types.ndarray(), per_pixel: ti.types.ndarray(), whole: ti.types.ndarray(),
+             flags: ti.types.ndarray()):
+        for j, tx in ti.ndrange(Hl, TX):
+            px0 = tx * TILE
+            px1 = ti.min(W - 1, px0 + TILE - 1)
+            for x in range(px0, px1 + 1):
+                per_pixel[j * W + x] = row_lerp(lo, j * Wl, x, Wl, k)
+            i0 = px0 // k - 1
+            for dx in ti.static(range(TILE)):
+                n, fx = ti.static(row_place(dx, k))
+                a = lo[j * Wl + ti.min(ti.max(i0 + n, 0), Wl - 1)]
+                b = lo[j * Wl + ti.min(ti.max(i0 + n + 1, 0), Wl - 1)]
+                whole[j * TX * TILE + px0 + dx] = (1.0 - fx) * a + fx * b
+            flags[j * TX + tx] = empty_rows(lo, j, j, px0, px1, 0, Wl, k)
+
+    read(lo, per_pixel, whole, flags)
+    want = _rows_along_x(layer, W, s)
+    got = per_pixel.to_numpy().reshape(Hl, W, 4)
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(whole.to_numpy().reshape(Hl, TX * TILE, 4)[:, :W], got)
+    empty = np.pad((want == (0.0, 0.0, 0.0, 1.0)).all(-1), ((0, 0), (0, TX * TILE - W)),
+                   constant_values=True).reshape(Hl, TX, TILE).all(-1)
+    assert empty[:, -1].sum() == Hl - 1 and not empty[5, -1] and empty[:, :-1].any(axis=1).all()
+    np.testing.assert_array_equal(flags.to_numpy().reshape(Hl, TX), empty)
 
 
 @pytest.mark.slow
@@ -234,13 +278,13 @@ def test_cached_edge_flags_follow_a_moving_body():
 
 @pytest.mark.parametrize("edge", [False, True])
 def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_drew(edge):
-    """``composite_tiles`` shows a tile row whose two reduced rows are marked empty
-    (``lo_rows``' ``row_empty``) as the packed background — except in a tile a soft or rigid body
+    """``composite_tiles`` shows a tile row whose two reduced rows are the empty layer
+    (``upsample.empty_rows``) as the packed background — except in a tile a soft or rigid body
     drew in (``dirty``), whose background is the frame's own (bodies drawn in), not the packed
-    one: there it composites as if unmarked. A 32 × 32 image (2 × 2 tiles) at s = 1/4, the
-    reduced layer empty, one reduced tile drawn (every tile is near it), no sprite at full
-    resolution; the packed background made from other colours than the frame's, so each copy
-    shows. ``edge``: the reduced depths alternate 1 and 10 along x, so every pixel's upsample is
+    one: there it composites as if not empty. A 32 × 32 image (2 × 2 tiles) at s = 1/4, the
+    reduced layer empty (or, to composite it, all but empty: red 10⁻³⁰, which shows nowhere), one
+    reduced tile drawn (every tile is near it), no sprite at full resolution; the packed
+    background made from other colours than the frame's, so each copy shows. ``edge``: the reduced depths alternate 1 and 10 along x, so every pixel's upsample is
     bilateral (the horizon's band): an empty row is the packed background there too, and
     computed it is the frame's background exactly (the bilateral mean of empty texels is empty)."""
     import taichi as ti
@@ -265,26 +309,24 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
     other_bg = frame_bg[::-1].copy()  # what the packed background was drawn from
     packed = np.zeros(px // 2, np.uint64)
     k["pack_background"](nd(v4, other_bg), packed, W, H, 0, 0, W, H, 1.0, 0)
-    acc = nd(v4, np.tile(np.float32([0, 0, 0, 1]), (LO + Wl * Hl + 16, 1)))
-    rows = nd(v4, np.tile(np.float32([0, 0, 0, 1]), (Hl * W, 1)))
     dirty = np.int32([1, 0, 0, 0])  # a body drew in tile 0
 
     depth = np.ones(LO + Wl * Hl, np.float32)
     if edge:
         depth[LO:] = np.tile(np.float32([1.0, 10.0]), Wl * Hl // 2)
 
-    def composite(row_empty_value):
+    def composite(red):
+        acc = nd(v4, np.tile(np.float32([red, 0, 0, 1]), (LO + Wl * Hl + 16, 1)))
         out = np.zeros(px, np.uint32)
         edges = nd(ti.i32, np.full(TX * TY, -1, np.int32))
-        k["composite_tiles"](np.zeros(TX * TY, np.int32), np.zeros(TX * TY, np.int32), acc, acc, rows,
-                             np.full(Hl * TX, row_empty_value, np.int32), nd(v4, frame_bg),
-                             nd(ti.f32, depth), packed, out,
+        k["composite_tiles"](np.zeros(TX * TY, np.int32), np.zeros(TX * TY, np.int32), acc, acc,
+                             nd(v4, frame_bg), nd(ti.f32, depth), packed, out,
                              np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,
                              np.zeros(TX * TY * 16, np.int32), 1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s,
-                             1, 1.0, 0.9, 0)
+                             1, 1.0, 0.9, 0, 4)
         return out.reshape(H, W)
 
-    marked, computed = composite(1), composite(0)
+    marked, computed = composite(0.0), composite(1e-30)
     body = np.zeros((H, W), bool)
     body[:16, :16] = True  # tile 0
     np.testing.assert_array_equal(marked[body], computed[body])
@@ -344,10 +386,10 @@ def test_a_reduced_tile_mixes_in_the_coarse_level_only_where_it_drew_under_it(sc
 
 @pytest.mark.parametrize("schedule", ["tiles", "pixels"])
 def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
-    """A frame whose sprites are all at full resolution (sparks, galaxy) neither interpolates the
-    reduced layer's rows nor reads that layer in the composite (``tally`` counts the reduced and
-    coarse levels' pairs): the same image as the path that does both, which a frame with one big
-    sprite still takes."""
+    """A frame whose sprites are all at full resolution (sparks, galaxy) does not read the reduced
+    layer in the composite (its ``has_lo`` argument 0; nor, per pixel, interpolate its rows:
+    ``lo_rows``), since ``tally`` counts the reduced and coarse levels' pairs: the same image as
+    the path that reads it, which a frame with one big sprite still takes."""
     s = _small_scene(schedule, [
         {"name": "dots", "position": [0.0, 1.0, 0.0], "speed": [0.5, 1.0],
          "bursts": [{"time": 0.0, "count": 60}], "lifetime": 5.0, "blend": "additive",
@@ -356,8 +398,17 @@ def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
          "lifetime": 5.0, "blend": "alpha", "size": [[0.0, 0.6]], "alpha": [[0.0, 0.5]]}])
     R = s.scene.renderer
     calls = []
-    lo_rows = R._k["lo_rows"]
-    R._k = dict(R._k, lo_rows=lambda *a: (calls.append(1), lo_rows(*a)))  # (this renderer's only)
+    name = f"composite_{schedule}"
+    composite, rows = R._k[name], R._k["lo_rows"]
+    at = [a.name for a in composite.kernel._primal.arguments].index("has_lo")
+    rows_calls = []
+
+    def reading(*a):  # (this renderer's kernels only)
+        if a[at]:
+            calls.append(1)
+        return composite(*a)
+
+    R._k = dict(R._k, **{name: reading}, lo_rows=lambda *a: (rows_calls.append(1), rows(*a)))
     splat = R._splat
 
     def always_reduced(t, *a, **k):  # the path before: the reduced layer read whenever it exists
@@ -375,6 +426,7 @@ def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
         s.step(1 / 60)
     drawn = s.render().copy()
     assert _levels(s) & {1, 2} and len(calls) == 2
+    assert rows_calls == (calls if schedule == "pixels" else [])  # (the tiles' reads the texels)
     info, tiles = R.records.spr_info.to_numpy(), R.records.spr_tiles.to_numpy()
     on = (info[:, 0] != 0) & (info[:, 2] >= 1)  # the tile-sprite pairs of levels 1 and 2
     want = int(((tiles[on, 2] - tiles[on, 0] + 1) * (tiles[on, 3] - tiles[on, 1] + 1)).sum())

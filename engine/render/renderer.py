@@ -109,7 +109,7 @@ class Renderer:
         if t is None:
             cap = self.capacity if self.has_particles else 1
             t = FrameTargets(W, H, key[2], self.chunks, alpha=self.uses_alpha, mesh=self.mesh is not None,
-                             pairs=max(1 << 14, int(1.5 * cap)), host=self.cpu)
+                             pairs=max(1 << 14, int(1.5 * cap)), host=self.cpu, rows=self.schedule == "pixels")
             self._targets[key] = t
             # keep the buffers of the last few sizes only (a window being resized would otherwise
             # hold one set per size it passed through); a size dropped here costs an allocation,
@@ -190,18 +190,19 @@ class Renderer:
                     self._downsample_depth(dep, W, H, at, Wk, k, 0, 0, Wk, Hk, t.dirty, prev, t.TX, 1)
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
         common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
-        if has_lo:
-            self._k["lo_rows"](t.accA, t.lo_rows, t.lo_row_empty, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
-                               int(TILE * t.scale) + 3, self.schedule == "pixels", round(1 / t.scale))
+        if has_lo and self.schedule == "pixels":
+            self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
+                               int(TILE * t.scale) + 3)
         if self.schedule == "tiles":
             # the tiles whose cached edge flag the redrawn background makes stale (one of margin)
             ex0, ey0, ex1, ey1 = 1, 1, 0, 0
             if rect is not None:
                 ex0, ey0 = rect[0] // TILE - 1, rect[1] // TILE - 1
                 ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
-            self._k["composite_tiles"](t.tile_count, t.full_rows, t.accA, t.accB, t.lo_rows, t.lo_row_empty, bgc, dep, t.bg_packed,
+            self._k["composite_tiles"](t.tile_count, t.full_rows, t.accA, t.accB, bgc, dep, t.bg_packed,
                                        packed, *untouched_tiles(t, image, packed), t.dirty, t.dirty_prev if t.mesh else t.dirty,
-                                       t.touched_lo, t.edges, t.edge_rows, ex0, ey0, ex1, ey1, *common)
+                                       t.touched_lo, t.edges, t.edge_rows, ex0, ey0, ex1, ey1, *common,
+                                       round(1 / t.scale) if t.has_lo else 2)
         else:
             self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,
                                         dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)

@@ -44,7 +44,7 @@ def reduced_size(W: int, H: int, scale: float):
 
 class FrameTargets:
     def __init__(self, W: int, H: int, scale: float, chunks: int, *, alpha: bool, mesh: bool,
-                 pairs: int = 1 << 16, host: bool = False):
+                 pairs: int = 1 << 16, host: bool = False, rows: bool = False):
         self.W, self.H, self.scale = int(W), int(H), float(scale)
         self.TX, self.TY = tiles_for(W, H)
         self.T0 = self.TX * self.TY
@@ -71,9 +71,8 @@ class FrameTargets:
         self.accA = ti.ndarray(vec4, shape=both)
         self.accA.fill(ti.Vector([0.0, 0.0, 0.0, 1.0]))  # the empty layer (see composite.splat_tiles)
         self.accB = ti.ndarray(vec4, shape=both if alpha else 1)
-        self.lo_rows = ti.ndarray(vec4, shape=self.Hl * W if self.has_lo else 1)
-        # per reduced row and full-resolution tile column: the row is the empty layer there
-        self.lo_row_empty = ti.ndarray(ti.i32, shape=self.Hl * self.TX if self.has_lo else 1)
+        # the reduced rows interpolated along x (the per-pixel schedule's: upsample.lo_rows)
+        self.lo_rows = ti.ndarray(vec4, shape=self.Hl * W if self.has_lo and rows else 1)
         self.touched_lo = ti.ndarray(ti.i32, shape=max(1, self.T1))
         self.touched_lo.fill(0)
         self.touched_co = ti.ndarray(ti.i32, shape=max(1, self.T2))

@@ -64,28 +64,84 @@ def quad_is_edge(z00, z10, z01, z11, z):
 
 
 @ti.func
+def lo_bilateral(px, py, z, lo: ti.template(), depth_lo: ti.template(), LO, Wl, Hl, s):
+    """The reduced layer at full-resolution pixel (px, py) of depth z, bilateral (where
+    ``quad_is_edge`` holds there): each of the four nearest texels weighs bilinear ×
+    1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface."""
+    ja, jb, xa, xb, fx, fy = lo_quad(px, py, s, Wl, Hl)
+    ra, rb = LO + ja * Wl, LO + jb * Wl
+    z00, z10 = depth_lo[ra + xa], depth_lo[ra + xb]
+    z01, z11 = depth_lo[rb + xa], depth_lo[rb + xb]
+    iz = 1.0 / z
+    w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(z00 - z) * iz)
+    w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(z10 - z) * iz)
+    w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(z01 - z) * iz)
+    w11 = fx * fy / (1e-3 + ti.abs(z11 - z) * iz)
+    return (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa] + w11 * lo[rb + xb]) \
+        / (w00 + w10 + w01 + w11)
+
+
+@ti.func
 def lo_sample(px, py, z, lo: ti.template(), rows: ti.template(), depth_lo: ti.template(), LO, W,
               Wl, Hl, s, edge):
-    """The reduced layer at full-resolution pixel (px, py) of depth z, bilinear: a vertical
-    lerp between two rows already interpolated along x (``lo_rows``). In a tile where the
-    reduced depths differ by more than 10 % (``edge``: a silhouette, not a receding floor) and
-    at this pixel too, bilateral instead: each of the four texels weighs bilinear ×
-    1 / (10⁻³ + |z_texel − z| / z), so smoke does not bleed across the edge of a nearer surface."""
+    """The reduced layer at full-resolution pixel (px, py) of depth z (the per-pixel schedule's),
+    bilinear: a vertical lerp between two rows already interpolated along x (``lo_rows``). In a
+    tile where the reduced depths differ by more than 10 % (``edge``: a silhouette, not a
+    receding floor) and at this pixel too, bilateral instead (``lo_bilateral``)."""
     ja, jb, xa, xb, fx, fy = lo_quad(px, py, s, Wl, Hl)
     out = (1.0 - fy) * rows[ja * W + px] + fy * rows[jb * W + px]
     if edge != 0:
         ra, rb = LO + ja * Wl, LO + jb * Wl
-        z00, z10 = depth_lo[ra + xa], depth_lo[ra + xb]
-        z01, z11 = depth_lo[rb + xa], depth_lo[rb + xb]
-        if quad_is_edge(z00, z10, z01, z11, z):
-            iz = 1.0 / z
-            w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(z00 - z) * iz)
-            w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(z10 - z) * iz)
-            w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(z01 - z) * iz)
-            w11 = fx * fy / (1e-3 + ti.abs(z11 - z) * iz)
-            out = (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa]
-                   + w11 * lo[rb + xb]) / (w00 + w10 + w01 + w11)
+        if quad_is_edge(depth_lo[ra + xa], depth_lo[ra + xb], depth_lo[rb + xa], depth_lo[rb + xb], z):
+            out = lo_bilateral(px, py, z, lo, depth_lo, LO, Wl, Hl, s)
     return out
+
+
+def row_place(dx: int, k: int):
+    """Where pixel px0 + dx of a row (px0 a multiple of TILE, the reduced scale 1/k) reads the
+    reduced row along x: (n, fx), texels i0 + n and i0 + n + 1 (i0 = px0/k − 1) at fraction fx,
+    as ``row_lerp`` (Python, for unrolled rows: column x = k·i + k/2 + m lies between texels i
+    and i + 1 at fx = (m + ½)/k)."""
+    q = dx - k // 2
+    return q // k + 1, (q % k + 0.5) / k
+
+
+@ti.func
+def lo_row(y, k: ti.template()):
+    """The upper reduced row (unclamped) that full-resolution row y reads at scale 1/k:
+    floor((y + ½)/k − ½), ``lo_quad``'s j0, in integers."""
+    return (2 * y + 1 - k) // (2 * k)
+
+
+@ti.func
+def row_lerp(lo: ti.template(), r, x, Wl, k: ti.template()):
+    """Reduced row r (``lo`` index of its first texel) interpolated along x at full-resolution
+    column x, scale 1/k (k = 2 or 4): ``lo_quad``'s x half by integers — x = k·i + k/2 + m lies
+    between texels i and i + 1 at fx = (m + ½)/k, exact in f32, the value the float form gives."""
+    ti.static_assert(k == 2 or k == 4, "the reduced layer's scale must be 1/2 or 1/4")
+    q = x - k // 2
+    i = q // k
+    fx = (ti.cast(q - i * k, ti.f32) + 0.5) * ti.static(1.0 / k)
+    return (1.0 - fx) * lo[r + ti.min(ti.max(i, 0), Wl - 1)] + fx * lo[r + ti.min(ti.max(i + 1, 0), Wl - 1)]
+
+
+@ti.func
+def empty_rows(lo: ti.template(), j0, j1, px0, px1, LO, Wl, k: ti.template()):
+    """A mask, bit j − j0 for reduced rows j0..j1: whether every texel that ``row_lerp`` reads
+    for the columns px0..px1 in row j is the empty layer (0, 0, 0, 1) exactly. Then so is each
+    value interpolated there, and each vertical lerp of two such rows (the weights are multiples
+    of 1/8, so (1 − f) + f = 1 exactly): the composite's pixel there is the packed background's
+    bit for bit (c·1 + 0)."""
+    xa = ti.max((px0 - k // 2) // k, 0)
+    xb = ti.min((px1 - k // 2) // k + 1, Wl - 1)
+    mask = 0
+    for j in range(j0, j1 + 1):
+        all_empty = 1
+        for i in range(LO + j * Wl + xa, LO + j * Wl + xb + 1):
+            if not is_empty_layer(lo[i]):
+                all_empty = 0
+        mask |= all_empty << (j - j0)
+    return mask
 
 
 @ti.func
@@ -199,54 +255,18 @@ def is_empty_layer(v):
 
 
 @ti.kernel
-def lo_rows(lo: ND_V4, rows: ND_V4, row_empty: ND_I1, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32,
-            s: ti.f32, touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32, per_pixel: ti.template(),
-            k: ti.template()):
-    """The reduced layer's rows interpolated along x at every full-resolution column:
-    rows[j·W + x] (the first half of a separable bilinear upsample; the composite does the
-    vertical half with two loads per pixel instead of four) — only the rows the composite
-    can read: it reads row j for a tile whose footprint (rows ``lo_near`` spans, fewer than
-    R = TILE·s + 3) holds a reduced tile drawn this frame, so row j is needed only when a
-    drawn reduced tile lies within R rows of it (the rest are left as they were, unread).
-
-    ``per_pixel`` (the GPU's schedule): one thread a texel, each testing its row (a few dozen
-    cached loads), since a thread a row leaves a GPU with ~Hl threads (180 at 1280×720: 1.75 ms
-    on an H200, one launch of debris). Else one thread a row (the CPU's), walking the row's
-    texels: ``k`` = 1/s (2 or 4) columns a texel pair. Both write the same values.
-
-    The CPU's also marks, per needed row j and full-resolution tile column tx,
-    ``row_empty[j·TX + tx]`` (TX = ceil(W / TILE)): whether every texel pair the row's values
-    there are drawn from is the empty layer (0, 0, 0, 1) exactly. Then so is each of those values,
-    and each vertical lerp of two such rows (the weights are multiples of 1/8 at s = 1/2 or 1/4,
-    so (1 − f) + f = 1 exactly), and the composite's pixel there is the packed background's bit
-    for bit (c·1 + 0): ``composite_tiles`` copies it (42–54 % of the rows of the tiles under
-    smoke that hold no sprite of their own, in explosion, debris and campfire at 1280×720). The
-    GPU's composite does not read it."""
+def lo_rows(lo: ND_V4, rows: ND_V4, W: ti.i32, H: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32,
+            touched_lo: ND_I1, TXl: ti.i32, TYl: ti.i32, R: ti.i32):
+    """The per-pixel schedule's (a GPU's): the reduced layer's rows interpolated along x at every
+    full-resolution column, rows[j·W + x] (the first half of a separable bilinear upsample;
+    ``composite_pixels`` does the vertical half with two loads per pixel instead of four), one
+    thread a texel — only the rows the composite can read: it reads row j for a tile whose
+    footprint (rows ``lo_near`` spans, fewer than R = TILE·s + 3) holds a reduced tile drawn this
+    frame, so row j is needed only when a drawn reduced tile lies within R rows of it (the rest
+    are left as they were, unread). The CPU's composite reads the texels themselves
+    (``row_lerp``): writing these rows (3.7 MB at 1280×720, s = ¼) and reading them back cost
+    more than interpolating each row in the composite."""
     LO = W * H
-    if ti.static(per_pixel):
-        for j, x in ti.ndrange(Hl, W):
-            if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
-                rows[j * W + x] = _row_texel(lo, j, x, LO, Wl, s)
-    else:
-        # s = 1/k: column x = k·i + k/2 + m (m < k) lies between texels i and i + 1 at
-        # fx = (m + ½)/k, the value _row_texel computes there (exact in f32 for k = 2, 4):
-        # two loads serve k columns, with no per-column index arithmetic (k odd: other fx)
-        ti.static_assert(k % 2 == 0, "lo_rows: the reduced layer's scale must be 1/2 or 1/4")
-        ti.static_assert(TILE & (TILE - 1) == 0)
-        TX = (W + TILE - 1) // TILE
-        for j in range(Hl):
-            if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
-                run = 1  # every pair so far in this tile column empty
-                for i in range(-1, (W + k) // k):
-                    a = lo[LO + j * Wl + ti.min(ti.max(i, 0), Wl - 1)]
-                    b = lo[LO + j * Wl + ti.min(ti.max(i + 1, 0), Wl - 1)]
-                    both = ti.select(is_empty_layer(a) and is_empty_layer(b), 1, 0)
-                    for m in ti.static(range(k)):
-                        x = k * i + k // 2 + m
-                        if 0 <= x < W:
-                            fx = ti.static((m + 0.5) / k)
-                            rows[j * W + x] = (1.0 - fx) * a + fx * b
-                            run &= both
-                            if x & (TILE - 1) == TILE - 1 or x == W - 1:  # a tile column's last
-                                row_empty[j * TX + x // TILE] = run
-                                run = 1
+    for j, x in ti.ndrange(Hl, W):
+        if _row_needed(j, touched_lo, TXl, TYl, R) != 0:
+            rows[j * W + x] = _row_texel(lo, j, x, LO, Wl, s)
