@@ -17,13 +17,11 @@ SERIAL_MAX = 8192
 
 def serial_sweep(count: int) -> bool:
     """Whether a group of ``count`` constraints is swept on one thread: at most SERIAL_MAX, and
-    on the CPU backend only (a GPU keeps a parallel loop a colour: one thread there is one of
-    thousands). Read at a kernel's compile time (``ti.static``)."""
-    if count > SERIAL_MAX:
-        return False
-    from ..runtime import _arch_in_use  # (lazily: this module is imported without Taichi)
+    on the CPU backend only (``engine.runtime.one_thread``; a GPU keeps a parallel loop a colour:
+    one thread there is one of thousands). Read at a kernel's compile time (``ti.static``)."""
+    from ..runtime import one_thread  # (lazily: this module is imported without Taichi)
 
-    return _arch_in_use() == "cpu"
+    return one_thread(count, SERIAL_MAX)
 
 
 def greedy_colors(n_nodes: int, elems: np.ndarray):

@@ -14,6 +14,7 @@ from typing import List
 import numpy as np
 import taichi as ti
 
+from .. import runtime
 from ..fieldio import ColumnWriter, WriterGroup
 from ..launch import data_oriented
 from . import local_space as _local
@@ -22,6 +23,11 @@ from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
 
 CHUNKS = 256  # most slices a sub-emitter pass splits a parent segment into (pass 2 sums ≤ 256 counts)
 CHUNK_MIN = 2048  # ... of at least this many slots each
+# a link whose parents are one slice and whose child segment has at most this many slots runs
+# its loops on the launching thread (engine.particles.spawn.spawn_children: ``serial``)
+SERIAL_CHILDREN = 4096
+# a spawn launch of at most this many births runs its loops on the launching thread (``serial``)
+SERIAL_BIRTHS = 512
 
 
 @dataclass
@@ -223,7 +229,7 @@ class Emitters:
         """Write a :meth:`plan`'s particles: one launch for all emitters (none for no plan)."""
         if plan is not None:
             rows, vals, nrows, first, adv, slots = plan
-            _k.spawn(self, self.state, rows, vals, nrows, first, adv, slots)
+            _k.spawn(self, self.state, rows, vals, nrows, first, adv, slots, runtime.one_thread(first, SERIAL_BIRTHS))
 
     def emit(self, t0: float, h: float) -> None:
         """Write everything due in [t0, t0 + h) before the step [t0, t0 + h) is taken."""
@@ -237,7 +243,8 @@ class Emitters:
             size = L.sizes[p]
             chunks = max(1, min(CHUNKS, size // CHUNK_MIN))
             _k.spawn_children(self, self.state, self.link_counts, self.link_parent, self.link_slot, L.starts[p],
-                              size, chunks, bit, min_speed, c, L.starts[c], L.sizes[c], count)
+                              size, chunks, bit, min_speed, c, L.starts[c], L.sizes[c], count,
+                              chunks == 1 and runtime.one_thread(L.sizes[c], SERIAL_CHILDREN))
 
     def dropped_counts(self) -> np.ndarray:
         return self.dropped.to_numpy()[: len(self.configs)]

@@ -110,7 +110,8 @@ def _row_of(rows: ti.template(), nrows, q):
 @ti.kernel
 def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i32, ndim=2),
           vals: ti.types.ndarray(dtype=ti.f32, ndim=2), nrows: ti.i32, total: ti.i32,
-          adv: ti.types.ndarray(dtype=ti.i32, ndim=2), slots: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+          adv: ti.types.ndarray(dtype=ti.i32, ndim=2), slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
+          serial: ti.template()):
     """Write the ``total`` particles of the plan: row r spawns k of emitter e at ring offset
     head + R_HEAD with serials from serial + R_SERIAL, born at stratified times in
     [ts0, ts0 + tspan) and written at the emitter's position then, with age −(t_s − t0): the step
@@ -124,7 +125,13 @@ def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i3
     Three passes in one launch: each birth's slot into ``slots`` (−1: none; a slot taken is
     marked alive at once, so the free-slot walk passes it), the free-slot walk, then every birth
     written from one call site (``init_particle`` inlined once: it is most of this kernel's
-    compile)."""
+    compile).
+
+    ``serial`` (a launch of few births on the CPU, a stream's step: ``engine.runtime.one_thread``):
+    every loop runs on the launching thread. Such a launch's four loops did microseconds of work
+    and each cost 20–170 µs to hand to the thread pool and back (flames.toml: ~0.35 ms a
+    frame)."""
+    ti.loop_config(serialize=serial)
     for q in range(total):
         r = _row_of(rows, nrows, q)
         e, j = rows[r, R_E], q - rows[r, R_FIRST]
@@ -135,6 +142,7 @@ def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i3
         else:
             slots[q] = slot
             S.particle_alive[slot] = 1
+    ti.loop_config(serialize=serial)
     for e in range(E.count):
         if E.emitter_moved[e] > 0:  # only when a ring slot was taken (nothing to do otherwise)
             E.emitter_moved[e] = 0
@@ -153,10 +161,12 @@ def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i3
                                 cursor += 1
                             else:
                                 E.dropped[e] += 1  # the segment is full
+    ti.loop_config(serialize=serial)
     for q in range(total):
         if slots[q] >= 0:
             r = _row_of(rows, nrows, q)
             _born(E, S, rows, vals, r, q - rows[r, R_FIRST], slots[q])
+    ti.loop_config(serialize=serial)
     for e in range(E.count):  # (after the births: they read the serial numbers before it)
         if adv[e, A_SIZE] > 0:
             E.emitter_head[e] = (E.emitter_head[e] + adv[e, A_HEAD]) % adv[e, A_SIZE]
@@ -173,10 +183,13 @@ def _fires(S: ti.template(), i, bit, min_speed):
 
 
 @ti.func
-def _count_events(S: ti.template(), counts: ti.template(), p_start, p_size, chunks, bit, min_speed):
+def _count_events(S: ti.template(), counts: ti.template(), p_start, p_size, chunks, bit, min_speed,
+                  serial: ti.template()):
     """Pass 1: how many parents fire in each of ``chunks`` consecutive slices of the segment (a
-    parallel loop of its own: inlined at the outermost scope of :func:`spawn_children`)."""
+    parallel loop of its own, or ``serial``: inlined at the outermost scope of
+    :func:`spawn_children`)."""
     size = (p_size + chunks - 1) // chunks
+    ti.loop_config(serialize=serial)
     for q in range(chunks):
         n = 0
         for i in range(p_start + q * size, p_start + ti.min(p_size, (q + 1) * size)):
@@ -204,7 +217,8 @@ def _child(E: ti.template(), S: ti.template(), i, c, sid, slot, bit):
 @ti.kernel
 def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), parent: ti.template(),
                    slots: ti.template(), p_start: ti.i32, p_size: ti.i32, chunks: ti.i32, bit: ti.i32,
-                   min_speed: ti.f32, c: ti.i32, c_start: ti.i32, c_size: ti.i32, count: ti.i32):
+                   min_speed: ti.f32, c: ti.i32, c_start: ti.i32, c_size: ti.i32, count: ti.i32,
+                   serial: ti.template()):
     """Pass 1 (:func:`_count_events`), then pass 2, in one launch (the loops run one after the
     other; a link took two launches a step, and the second cost ~0.14 ms: debris' sub-emitters
     5.2 → 3.8 ms a frame). Pass 2: each slice adds up the counts before it (its parents' first
@@ -214,10 +228,16 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
     takes the first free slot of the child segment in slot order (one thread walks them in n
     order: deterministic), or is counted dropped when the segment is full. As in ``spawn``, the slots are chosen first
     (``parent[n]``: the parent slot of child n; ``slots[n]``: its slot, −1 none; a slot taken is
-    marked alive at once) and every child is written after, from one call site."""
-    _count_events(S, counts, p_start, p_size, chunks, bit, min_speed)
+    marked alive at once) and every child is written after, from one call site.
+
+    ``serial`` (a small link on the CPU: one slice of parents, a small child segment;
+    ``engine.runtime.one_thread``): every loop runs on the launching thread. A small link's five
+    loops did microseconds of work and each cost 20–170 µs to hand to the thread pool and back:
+    debris.toml's four launches a frame, 20 loops, ~0.9 ms."""
+    _count_events(S, counts, p_start, p_size, chunks, bit, min_speed, serial)
     h0, s0 = E.emitter_head[c], E.emitter_serial[c]
     size = (p_size + chunks - 1) // chunks
+    ti.loop_config(serialize=serial)
     for q in range(chunks):
         rank = 0
         for m in range(q):
@@ -239,9 +259,11 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
                             S.particle_alive[slot] = 1
                 rank += 1
     total = 0
+    ti.loop_config(serialize=serial)
     for q in range(chunks):
         total += counts[q]
     born = ti.min(total * count, c_size)
+    ti.loop_config(serialize=serial)
     for _ in range(1):  # one thread: the moved children in n order
         if E.emitter_moved[c] > 0:
             E.emitter_moved[c] = 0
@@ -256,6 +278,7 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
                         cursor += 1
                     else:
                         E.dropped[c] += 1  # the segment is full
+    ti.loop_config(serialize=serial)
     for n in range(born):
         if slots[n] >= 0:
             _child(E, S, parent[n], c, s0 + n, slots[n], bit)
