@@ -16,14 +16,17 @@ from engine.particles.interact import GRAIN_SKIN
 
 
 # -- the grid ----------------------------------------------------------------------------------
-def test_grid_sorted_by_slot_within_buckets_and_complete():
+@pytest.mark.parametrize("serial", [True, False])
+def test_grid_sorted_by_slot_within_buckets_and_complete(serial, monkeypatch):
     """Every member lands in the bucket of its cell exactly once, non-members nowhere, and each
     bucket's slots are in increasing slot order (the stable order frames depend on); 100 points
-    beyond the 30-bit cell range are counted as ungridded, not dropped silently."""
+    beyond the 30-bit cell range are counted as ungridded, not dropped silently. Built on the
+    launching thread (a small grid on the CPU: ``HashGrid.serial``) or by parallel loops."""
     from engine import runtime
     from engine.geometry.grid import HashGrid
 
     runtime.ensure_init()
+    monkeypatch.setattr(runtime, "one_thread", lambda n, limit: serial)
     n = 3000
     rng = np.random.default_rng(1)
     p = (rng.random((n, 3)) * 3 - 1.5).astype(np.float32)
@@ -33,6 +36,7 @@ def test_grid_sorted_by_slot_within_buckets_and_complete():
     pos.from_numpy(p)
     mem.from_numpy(member)
     g = HashGrid(n, 0.05)
+    assert g.serial == serial
     g.build(pos, mem)
     st = g.stats()
     far = int(member[:100].sum())
@@ -56,11 +60,12 @@ def _lists_checked(cfg, frames=6):
     """Run cfg, checking at each sweep and velocity pass that the lists it gathers over are
     whole: where they are fresh, that every member's list holds every slot of the grid walk's 27
     cells closer than the kinds' largest cut-off (so each gather gets the walk's terms); where
-    they are stale, that the kernel listed them again first (every member's ``x_ref`` is then
+    they are stale, that the stage listed them again first (every member's ``x_ref`` is then
     where it stood at the call). Returns the scene's interactions, the member counts checked
     fresh and the number of stale calls."""
     sc = sim_scene(cfg)
     I = sc.particles.interact
+    assert I.relist_on_host  # (the CPU's: each stage's relisting tested and launched here)
     checked, relisted = [], []
 
     def check():
@@ -80,13 +85,20 @@ def _lists_checked(cfg, frames=6):
             check()
         x = I.state.particle_pos.to_numpy()
         inner(h)
-        if stale:  # (the call's own kernel relisted first)
+        if stale:  # (the stage relisted first)
             members = np.flatnonzero(I.member.to_numpy())
             assert np.array_equal(I.lists.x_ref.to_numpy()[members], x[members])
             relisted.append(len(members))
 
-    for name in ("sweep", "finish"):
-        setattr(I, name, lambda h, inner=getattr(I, name): checked_call(h, inner))
+    run = I.run_stage  # (a stage: on the CPU its relisting is launched first)
+
+    def stage(name, *args):
+        if name in ("sweep", "finish"):
+            checked_call(args[0], lambda h: run(name, h))
+        else:
+            run(name, *args)
+
+    I.run_stage = stage
     run_frames(sc, frames)
     return I, checked, relisted
 

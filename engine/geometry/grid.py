@@ -4,7 +4,8 @@ by cell, cell starts, a 27-cell search), rebuilt every step from the slots a cal
 Cells are cubes of side ``cell`` (m) indexed by ``floor(x / cell)`` (int32 per axis) and hashed into
 a power-of-two table (Teschner et al. 2003's primes), so space is unbounded and memory follows the
 slot count, never the scene's extent. The build is one kernel of top-level loops (each a parallel
-loop; Taichi runs them in order):
+loop, or on the CPU for a grid of at most SERIAL_SLOTS slots each on the launching thread; Taichi
+runs them in order):
 
 1. clear the bucket counts; 2. count: each member slot's cell and bucket, ``count[b] += 1`` with an
 integer atomic (the same counts in any thread order); 3. an exclusive prefix scan of the counts in
@@ -26,8 +27,14 @@ that walk once, for gathers that run several times over the same neighbourhood.
 
 import taichi as ti
 
+from .. import runtime
 from ..launch import data_oriented
 from .sizing import BLOCK, MAX_CELL_INDEX, NEIGHBOURS, table_size
+
+# a grid over at most this many slots is rebuilt on the launching thread on the CPU (each of its
+# seven loops, and the listing's two copies, a few µs of work there; each parallel loop a hand-off
+# to the thread pool and back: engine.runtime.one_thread)
+SERIAL_SLOTS = 4096
 
 _P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003, "Optimized spatial hashing"
 
@@ -54,6 +61,7 @@ class HashGrid:
         self.cell = float(cell)
         self.inv_cell = 1.0 / self.cell
         self.table = table_size(max(1, self.hi - self.lo))
+        self.serial = runtime.one_thread(self.hi - self.lo, SERIAL_SLOTS)  # (a compile-time switch)
         self.blocks = self.table // BLOCK
         self.mask = self.table - 1
         self.count = ti.field(ti.i32, shape=self.table)
@@ -110,11 +118,13 @@ class HashGrid:
     def rebuild(self, pos: ti.template(), member: ti.template()):
         """``build``'s loops, for a caller's kernel to run among its own (each stays a parallel
         loop at that kernel's top level: call it there, never inside a loop or a branch)."""
+        ti.loop_config(serialize=ti.static(self.serial))
         for b in range(self.table):
             self.count[b] = 0
             self.fill[b] = 0
         self.ungridded[None] = 0
         self.max_bucket[None] = 0
+        ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.lo, self.hi):
             b = -1
             if member[i] != 0:
@@ -129,11 +139,13 @@ class HashGrid:
                 else:
                     ti.atomic_add(self.ungridded[None], 1)
             self.slot_bucket[i] = b
+        ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.blocks):  # level 1: each block's total
             s = 0
             for m in range(BLOCK):
                 s += self.count[k * BLOCK + m]
             self.block_sum[k] = s
+        ti.loop_config(serialize=ti.static(self.serial))
         for _ in range(1):  # level 2: exclusive scan of the block totals (one thread, T/1024 adds)
             run = 0
             for k in range(self.blocks):
@@ -141,16 +153,19 @@ class HashGrid:
                 self.block_sum[k] = run
                 run += s
             self.start[self.table] = run
+        ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.blocks):  # level 3: block-local scans from each block's offset
             run = self.block_sum[k]
             for m in range(BLOCK):
                 b = k * BLOCK + m
                 self.start[b] = run
                 run += self.count[b]
+        ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.lo, self.hi):
             b = self.slot_bucket[i]
             if b >= 0:
                 self.sorted[self.start[b] + ti.atomic_add(self.fill[b], 1)] = i
+        ti.loop_config(serialize=ti.static(self.serial))
         for b in range(self.table):  # per-bucket insertion sort by slot: the order no longer
             lo, hi = self.start[b], self.start[b] + self.count[b]  # depends on the fill's timing
             for k in range(lo + 1, hi):
@@ -239,11 +254,13 @@ class NeighbourLists:
             self.unlisted[None] = 0
         # (each loop's range is empty when not listing: an empty parallel loop costs ~12 µs
         # here, one that tests a flag per item ~17 µs)
+        ti.loop_config(serialize=ti.static(G.serial))  # (the two copies: a few µs on a small grid)
         for k in range(G.members[None] * self.go[None]):
             j = G.sorted[k]
             self.sorted_x[k] = self.pos[j]
             self.sorted_kind[k] = kind[j]
             self.sorted_cell[k] = G.slot_cell[j]
+        ti.loop_config(serialize=ti.static(G.serial))
         for i in range(G.lo, G.lo + (G.hi - G.lo) * self.go[None]):  # slots outside the grid:
             if member[i] == 0 or G.slot_bucket[i] < 0:  # nothing listed
                 if member[i] != 0:

@@ -36,6 +36,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from .. import runtime
 from ..geometry.grid import HashGrid, NeighbourLists
 from ..launch import data_oriented, fast_method
 from . import pm
@@ -143,13 +144,20 @@ class Interactions(FluidTerms):
         skin = NeighbourLists.SKIN if self.fluid else GRAIN_SKIN
         self.lists = NeighbourLists(self.grid, state.particle_pos, skin) if self.grid is not None else None
         self.listed = self.lists is not None  # (a compile-time switch)
+        # on the CPU the sweeps and the velocity pass do not test ``stale`` themselves: it is read
+        # here before each (a 5 µs read; kernels there run in order on this thread anyway) and a
+        # kernel lists them again only when set — the listing's three loops in every sweep, empty
+        # ~88 % of the time, cost a pool hand-off each (engine.runtime.one_thread). A GPU keeps the
+        # test on the device: a read there waits for every kernel before it
+        self.relist_on_host = self.listed and runtime._arch_in_use() == "cpu"  # (compile-time)
 
     # -- per-step entry --------------------------------------------------------------------------
     def step(self, h: float) -> None:
         """Interact over the step of h just taken (positions and velocities at its end)."""
-        # (a kernel a stage: the grid, the lists and the test for stale lists live in them, so a
-        # step takes 2 + iterations launches and reads nothing back; it took 5 + 2·iterations,
-        # one more a relisting, iterations + 1 of them reads of ``stale``)
+        # (a kernel a stage: the grid, the lists and, on a GPU, the test for stale lists live in
+        # them, so a step takes 2 + iterations launches and reads nothing back; it took
+        # 5 + 2·iterations, one more a relisting, iterations + 1 of them reads of ``stale``. On the
+        # CPU the test is such a read again, ``relist_on_host``: one more launch a relisting)
         # (each launched without Taichi's per-call Python: engine.launch; sand's 24 a frame)
         if self.grid is not None:
             self._launch("begin")
@@ -162,13 +170,20 @@ class Interactions(FluidTerms):
         self._launch("finish", h)
 
     def _launch(self, name: str, *args) -> None:
-        """Kernel ``name`` on the fast launch, or a callable set on the instance under that name
-        (a hook wrapping the kernel, as tests set)."""
+        """Stage ``name`` (``run_stage``), or a callable set on the instance under that name (a
+        hook wrapping the stage, as tests set)."""
         own = self.__dict__.get(name)
         if own is not None:
             own(*args)
         else:
-            _FAST[name](self, *args)
+            self.run_stage(name, *args)
+
+    def run_stage(self, name: str, *args) -> None:
+        """Kernel ``name`` on the fast launch; a sweep or the velocity pass first lists the
+        neighbours again when they are stale (``relist_on_host``: tested here, on the CPU)."""
+        if self.relist_on_host and name in ("sweep", "finish") and self.lists.stale[None]:
+            _FAST["relist_all"](self)
+        _FAST[name](self, *args)
 
     def _mesh_gravity(self) -> None:
         """The gravity slots' accelerations by particle–mesh (engine.particles.pm), at the step's
@@ -192,6 +207,11 @@ class Interactions(FluidTerms):
         self.lists.build(self.member, self.slot_kind)
 
     # -- kernels ---------------------------------------------------------------------------------
+    @ti.kernel
+    def relist_all(self):
+        """Every member's neighbours listed again (at the positions now)."""
+        self.lists.relist(self.member, self.slot_kind, False)
+
     @ti.kernel
     def prepare(self):
         """Each slot's kind and membership; the step's end (x_pre, v_pre); no correction yet."""
@@ -266,9 +286,11 @@ class Interactions(FluidTerms):
     @ti.kernel
     def sweep(self, h: ti.f32):
         """One Jacobi sweep: every member's Δx from its neighbours' positions, then applied
-        (after listing them again if a member has moved too far since: ``lists.stale``)."""
+        (after listing them again if a member has moved too far since: ``lists.stale``; on the
+        CPU ``run_stage`` does that first, ``relist_on_host``)."""
         S = self.state
-        self.lists.relist(self.member, self.slot_kind, True)
+        if ti.static(not self.relist_on_host):
+            self.lists.relist(self.member, self.slot_kind, True)
         if ti.static(self.fluid):
             for i in range(self.lo, self.hi):
                 if self.slot_kind[i] == 2:
@@ -329,8 +351,8 @@ class Interactions(FluidTerms):
         """Velocities from the corrections, the fluid's velocity terms, gravity's kick, then every
         member projected onto the colliders (x_pre, v_pre: the step's end before the solve)."""
         S = self.state
-        if ti.static(self.listed):  # (the velocity gathers read the lists: fresh ones)
-            self.lists.relist(self.member, self.slot_kind, True)
+        if ti.static(self.listed and not self.relist_on_host):  # (the velocity gathers read the
+            self.lists.relist(self.member, self.slot_kind, True)  # lists: fresh ones)
         for i in range(self.lo, self.hi):
             if self.member[i] != 0:
                 v = S.particle_vel[i] + self.corr[i] / h
@@ -389,4 +411,4 @@ class Interactions(FluidTerms):
                 S.particle_vel[i] = v
 
 
-_FAST = {name: fast_method(Interactions, name) for name in ("begin", "prepare", "sweep", "finish")}
+_FAST = {name: fast_method(Interactions, name) for name in ("begin", "prepare", "sweep", "finish", "relist_all")}
