@@ -23,9 +23,10 @@ from .spawn import EVENT_COLLISION, EVENT_DEATH, SHAPES
 
 CHUNKS = 256  # most slices a sub-emitter pass splits a parent segment into (pass 2 sums ≤ 256 counts)
 CHUNK_MIN = 2048  # ... of at least this many slots each
-# a link whose parents are one slice and whose child segment has at most this many slots runs
-# its loops on the launching thread (engine.particles.spawn.spawn_children: ``serial``)
-SERIAL_CHILDREN = 4096
+# a link whose parents are one slice and that can write at most this many children a step (its
+# parents × count, or its child segment's size if less) runs its loops on the launching thread
+# (engine.particles.spawn.spawn_children: ``serial``; ~0.2 µs a child written there)
+SERIAL_CHILDREN = 8192
 # a spawn launch of at most this many births runs its loops on the launching thread (``serial``)
 SERIAL_BIRTHS = 512
 
@@ -244,7 +245,7 @@ class Emitters:
             chunks = max(1, min(CHUNKS, size // CHUNK_MIN))
             _k.spawn_children(self, self.state, self.link_counts, self.link_parent, self.link_slot, L.starts[p],
                               size, chunks, bit, min_speed, c, L.starts[c], L.sizes[c], count,
-                              chunks == 1 and runtime.one_thread(L.sizes[c], SERIAL_CHILDREN))
+                              chunks == 1 and runtime.one_thread(min(size * count, L.sizes[c]), SERIAL_CHILDREN))
 
     def dropped_counts(self) -> np.ndarray:
         return self.dropped.to_numpy()[: len(self.configs)]

@@ -230,7 +230,7 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
     (``parent[n]``: the parent slot of child n; ``slots[n]``: its slot, −1 none; a slot taken is
     marked alive at once) and every child is written after, from one call site.
 
-    ``serial`` (a small link on the CPU: one slice of parents, a small child segment;
+    ``serial`` (a small link on the CPU: one slice of parents, few children at most;
     ``engine.runtime.one_thread``): every loop runs on the launching thread. A small link's five
     loops did microseconds of work and each cost 20–170 µs to hand to the thread pool and back:
     debris.toml's four launches a frame, 20 loops, ~0.9 ms."""
