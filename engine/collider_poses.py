@@ -16,22 +16,26 @@ import numpy as np
 import taichi as ti
 
 from .geometry.shapes import BOX, CAPSULE, PLANE, SPHERE, quat_matrix_t, quat_normalize_t
+from . import runtime
 from .launch import fast
 
 IDENTITY = (1.0, 0.0, 0.0, 0.0)
+SERIAL_SHAPES = 4096  # shapes posed on the launching thread, at most (CPU: engine.runtime.one_thread)
 
 
 @ti.kernel
 def _pose_fields(point: ti.template(), vel: ti.template(), normal: ti.template(), axis_x: ti.template(),
                  axis_z: ti.template(), omega: ti.template(), rows: ti.types.ndarray(), place: ti.template(),
-                 turn: ti.template(), boxes: ti.template(), spins: ti.template()):
+                 turn: ti.template(), boxes: ti.template(), spins: ti.template(), serial: ti.template()):
     """Every shape's pose from rows (n, 6 [place] + 12 [turn]) in the fields' dtype: position and
     velocity over the step (``place``: x, y, z, vx, vy, vz), then (``turn``) the normal, the box
     axes x and z (``boxes``) and ω (``spins``). One launch a step where a field's ``from_numpy``
     costs ~0.2–0.35 ms of Python each (crates' particles place 25 turning shapes a step); a
     second launch for the turning half cost ~0.14 ms more (debris: follow 5.4–5.7 → 4.7–5.0 ms
-    for five a frame)."""
+    for five a frame). ``serial``: on the launching thread (a few shapes on the CPU:
+    engine.runtime.one_thread)."""
     o = ti.static(6 if place else 0)
+    ti.loop_config(serialize=serial)
     for k in range(rows.shape[0]):
         for c in ti.static(range(3)):
             if ti.static(place):
@@ -103,7 +107,8 @@ class ShapePoses:
         boxes, f = BOX in self.kinds, self.collider_normal
         _pose_fields(self.collider_point, self.collider_vel, f, self.collider_axis_x if boxes else f,
                      self.collider_axis_z if boxes else f, self.collider_omega if self.rotating else f,
-                     rows, place_rows is not None, turned, boxes, self.rotating)
+                     rows, place_rows is not None, turned, boxes, self.rotating,
+                     runtime.one_thread(self.count, SERIAL_SHAPES))
 
     def reset(self) -> None:
         """Back where the specs start, at rest, at t = 0 (a reused scene)."""

@@ -21,6 +21,7 @@ the CPU and make sums depend on timing):
 
 import taichi as ti
 
+from .. import runtime
 from ..launch import fast
 
 SCAN_BLOCK = 64  # tiles per block of the two-level scan
@@ -41,6 +42,9 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
     chunk = (cap + chunks - 1) // chunks
     info, tiles = rec.spr_info, rec.spr_tiles
     geom, slook, tail, softf = rec.spr_geom, rec.spr_look, rec.spr_tail, rec.spr_soft
+    # the two loops over the scan's blocks (T/64 of them: 74 at 1280×720) on the launching thread
+    # on the CPU: each was a hand-off to the thread pool for a few dozen adds (engine.runtime.one_thread)
+    blocks_serial = runtime._arch_in_use() == "cpu"
 
     @ti.func
     def tile_base(level, T0, T1, TX0, TX1, TX2):
@@ -74,6 +78,7 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
                             t = base + ty * tx_n + tx
                             hist[c, t] = hist[c, t] + 1  # (not +=: that compiles to an atomic)
         # 2. offsets
+        ti.loop_config(serialize=ti.static(blocks_serial))
         for b in range(NB):
             block_sum[b] = 0
         for t in range(T):
@@ -93,6 +98,7 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
                 tile_start[t] = run
                 run += tile_count[t]
         total = 0
+        ti.loop_config(serialize=ti.static(blocks_serial))
         for b in range(NB):
             total += block_sum[b]
         reduced = 0  # (the levels' tiles are consecutive: 0, then 1 and 2 from T0 on)

@@ -21,6 +21,7 @@ background and depth stay as the background pass left them.
 import numpy as np
 import taichi as ti
 
+from .. import runtime
 from ..launch import fast
 from .sprites import TILE
 from .upsample import ND_F, ND_I1, ND_V4  # pixel arrays: flat, y·W + x
@@ -32,6 +33,19 @@ NEAR = 0.05
 DEPTH_BIAS = 0.01  # m: cloth resting on the ground would z-fight it
 EMPTY = (1 << 63) - 1  # no triangle at this pixel
 FIXED = 65536.0  # fixed-point scale of the line sums
+SERIAL_VERTICES = 65536  # host vertices copied in on the launching thread, at most (CPU)
+
+
+@ti.kernel
+def _copy_in(dst: ti.template(), rows: ti.types.ndarray(dtype=ti.f32, ndim=2), serial: ti.template()):
+    """rows (n, 3) f32 into the vec3 field ``dst`` (what ``from_numpy`` writes)."""
+    ti.loop_config(serialize=serial)
+    for i in range(rows.shape[0]):
+        for c in ti.static(range(3)):
+            dst[i][c] = rows[i, c]
+
+
+_copy_in = fast(_copy_in)  # (engine.launch: without Taichi's per-call Python)
 
 
 class MeshLayer:
@@ -67,8 +81,11 @@ class MeshLayer:
         n = max(1, self.nv)
         self.mesh_pos = ti.Vector.field(3, ti.f32, shape=n)
         # the host's rows, kept between frames (the field bodies' rows in it stay 0: the pass
-        # writes those in mesh_pos itself, after ``update``'s from_numpy and before any read)
+        # writes those in mesh_pos itself, after ``update``'s copy and before any read)
         self._staged = np.zeros((n, 3), np.float32) if self.host_rows else None
+        # (a field's from_numpy: ~0.2 ms of Python and a parallel loop a frame; a fast-launched
+        # copy, on the launching thread for a few thousand vertices on the CPU: engine.runtime.one_thread)
+        self._serial = runtime.one_thread(n, SERIAL_VERTICES)
         self.mesh_nrm = ti.Vector.field(3, ti.f32, shape=n)
         self.mesh_col = ti.Vector.field(3, ti.f32, shape=n)
         cols = np.concatenate([np.broadcast_to(np.asarray(d["color"], np.float32), (k, 3))
@@ -103,7 +120,7 @@ class MeshLayer:
         if self.host_rows:
             for positions, first, count in self.host_rows:
                 self._staged[first:first + count] = positions()
-            self.mesh_pos.from_numpy(self._staged)
+            _copy_in(self.mesh_pos, self._staged, self._serial)
 
     def draw(self, t, cam) -> None:
         """Rasterise into the frame targets ``t`` (engine.render.targets.FrameTargets): the

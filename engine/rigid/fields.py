@@ -4,6 +4,7 @@ contacts in and its bodies and multipliers out (:mod:`.kernel` builds the subste
 
 import taichi as ti
 
+from .. import runtime
 from ..launch import fast
 from .elements import f64
 from .kernel import _build
@@ -75,15 +76,20 @@ class Fields:
 # ``from_numpy`` per array cost ~0.2 ms of Python, 16 of them 4 ms a step for crates' 25 boxes)
 BODY_COLS = 24  # inv_m, inv_i (3), moving, x (3), q (4), v (3), w (3), kx0 (3), kx1 (3)
 CONTACT_COLS = 17  # a, b, n (3), ra (3), rb (3), round_a, round_b, mu, e
+SERIAL_ROWS = 4096  # bodies and contacts copied on the launching thread, at most (CPU)
 
 
 def _build_io(F):
     """Kernels that copy a step's bodies and contacts in and the bodies and multipliers out, as
-    float64 rows (exact: the integers are small, the floats f64 on both sides)."""
+    float64 rows (exact: the integers are small, the floats f64 on both sides). Up to
+    SERIAL_ROWS bodies and contacts, on the CPU, each loop runs on the launching thread
+    (engine.runtime.one_thread: a few dozen rows' copy is less than a hand-off to the pool)."""
+    serial = runtime.one_thread(max(F.nb, F.capacity), SERIAL_ROWS)
 
     @ti.kernel
     def load_bodies(rows: ti.types.ndarray(), kinematic: ti.i32):
         """rows (nb, BODY_COLS); ``kinematic`` 0 leaves kx0, kx1 as they are."""
+        ti.loop_config(serialize=ti.static(serial))
         for i in range(rows.shape[0]):
             F.inv_m[i] = rows[i, 0]
             F.moving[i] = ti.cast(rows[i, 4], ti.i32)
@@ -101,6 +107,7 @@ def _build_io(F):
     @ti.kernel
     def load_contacts(rows: ti.types.ndarray()):
         """rows (≤ capacity, CONTACT_COLS)."""
+        ti.loop_config(serialize=ti.static(serial))
         for k in range(rows.shape[0]):
             F.ca[k] = ti.cast(rows[k, 0], ti.i32)
             F.cb[k] = ti.cast(rows[k, 1], ti.i32)
@@ -116,6 +123,7 @@ def _build_io(F):
     @ti.kernel
     def store(bodies: ti.types.ndarray(), lam: ti.types.ndarray()):
         """bodies (n, 13) = x, q, v, w of the first n bodies; lam (nc,) the contacts' multipliers."""
+        ti.loop_config(serialize=ti.static(serial))
         for i in range(bodies.shape[0]):
             for c in ti.static(range(3)):
                 bodies[i, c] = F.x[i][c]
@@ -123,6 +131,7 @@ def _build_io(F):
                 bodies[i, 10 + c] = F.w[i][c]
             for c in ti.static(range(4)):
                 bodies[i, 3 + c] = F.q[i][c]
+        ti.loop_config(serialize=ti.static(serial))
         for k in range(lam.shape[0]):
             lam[k] = F.lam[k]
 
