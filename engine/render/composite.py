@@ -173,23 +173,40 @@ def _build(uses_add: bool, uses_alpha: bool):
         uses_add, uses_alpha, layer)
 
     @ti.func
-    def reduced_row(lo: ti.template(), bgc: ti.template(), out: ti.template(), la, lb, k0, px0, fy,
-                    exposure, mode, Wl, k: ti.template()):
+    def reduced_row(lo: ti.template(), dep: ti.template(), bgc: ti.template(), out: ti.template(), la, lb,
+                    k0, px0, fy, exposure, mode, Wl, k: ti.template(), bilateral):
         """A whole tile row (TILE pixels from k0 = y·W + px0) of the reduced layer alone over the
         background, from the reduced texels of rows la, lb (their first texels' indices): each
         row's TILE/k + 2 texels loaded once, interpolated along x at each pixel (``row_lerp``),
         then between the rows; all loads and table lookups first, then the stores (a store
         through an ndarray makes every later load re-read its array's address: none come
-        between them)."""
+        between them). ``bilateral``: every pixel of the row takes ``upsample.lo_bilateral``'s
+        weights instead (the horizon's band under smoke, where the receding floor's depth grows
+        by more than 10 % a texel), the row's texel depths loaded once too: the per-pixel path
+        took each pixel's quad by float floors and its eight loads again (explosion.toml at
+        1280×720: 3,520 such rows, ~1 ms of the composite's 5.7). (A row function of its own for
+        them, unrolled too, took the composite's cold compile 1.6 → 3.6–4.5 s; as a loop it was
+        slower than the per-pixel path.)"""
         i0 = (px0 // k) - 1  # the texel left of the row's first pixel (px0 a multiple of TILE)
         ta = [lo[la + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
         tb = [lo[lb + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
+        za = [dep[la + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
+        zb = [dep[lb + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
         vals = ti.Vector([0] * TILE, dt=ti.u32)
         for dx in ti.static(range(TILE)):
             n, fx = ti.static(row_place(dx, k))
             a = (1.0 - fx) * ta[n] + fx * ta[n + 1]
             b = (1.0 - fx) * tb[n] + fx * tb[n + 1]
-            vals[dx] = finish(bgc[k0 + dx], (1.0 - fy) * a + fy * b, EMPTY_LAYER, exposure, mode)
+            low = (1.0 - fy) * a + fy * b
+            if bilateral != 0:
+                z = dep[k0 + dx]
+                iz = 1.0 / z
+                w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(za[n] - z) * iz)
+                w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(za[n + 1] - z) * iz)
+                w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(zb[n] - z) * iz)
+                w11 = fx * fy / (1e-3 + ti.abs(zb[n + 1] - z) * iz)
+                low = (w00 * ta[n] + w10 * ta[n + 1] + w01 * tb[n] + w11 * tb[n + 1]) / (w00 + w10 + w01 + w11)
+            vals[dx] = finish(bgc[k0 + dx], low, EMPTY_LAYER, exposure, mode)
         for dx in ti.static(range(TILE)):
             out[k0 + dx] = vals[dx]
 
@@ -308,19 +325,20 @@ def _build(uses_add: bool, uses_alpha: bool):
                         # than 10 % a texel, is mostly such rows (flames.toml at 1280×720: three
                         # rows of tiles, 56k pixels)
                         background_row(bg_packed, out, out64, copy, y, px0, px1, W)
+                    elif (full_here == 0 and near != 0 and (mask == 0 or mask == (1 << TILE) - 1)
+                          and px1 - px0 == TILE - 1 and mode == 0):
+                        # the common case under smoke: the reduced layer alone, bilinear (or, with a
+                        # full mask, bilateral at every pixel: the horizon's band), a whole row of
+                        # the tile, opaque RGBA (the usual mode) with the mode a constant: its tests
+                        # and swaps folded away (a branch per pixel cost the unrolled row ~1 ms a
+                        # frame at 1280×720; a second unrolled copy for the other modes, ~0.15 s of
+                        # every start: they take the loops)
+                        reduced_row(accA, dep, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, 0, Wl, k,
+                                    mask)
                     elif full_here == 0 and near != 0 and mask == 0:
-                        # the common case under smoke: the reduced layer alone, bilinear
-                        if px1 - px0 == TILE - 1 and mode == 0:
-                            # a whole row of the tile, opaque RGBA (the usual mode) with the mode a
-                            # constant: its tests and swaps folded away (a branch per pixel cost
-                            # the unrolled row ~1 ms a frame at 1280×720; a second unrolled copy
-                            # for the other modes, ~0.15 s of every start: they take the loop)
-                            reduced_row(accA, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, 0, Wl, k)
-                        else:
-                            for x in range(px0, px1 + 1):
-                                low = (1.0 - fy) * row_lerp(accA, ra, x, Wl, k) + fy * row_lerp(accA, rb, x, Wl, k)
-                                out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure,
-                                                        mode)
+                        for x in range(px0, px1 + 1):
+                            low = (1.0 - fy) * row_lerp(accA, ra, x, Wl, k) + fy * row_lerp(accA, rb, x, Wl, k)
+                            out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure, mode)
                     elif full_here == 0 and near == 0 and dirty[t] == 0:
                         background_row(bg_packed, out, out64, copy, y, px0, px1, W)
                     else:
