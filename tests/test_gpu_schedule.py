@@ -117,8 +117,12 @@ def test_small_xpbd_groups_are_serial_on_the_cpu_only(monkeypatch):
     from engine.geometry.colouring import SERIAL_MAX, serial_sweep
 
     assert serial_sweep(100) and serial_sweep(SERIAL_MAX) and not serial_sweep(SERIAL_MAX + 1)
+    # the small loops run on one thread ask engine.runtime.one_thread (spawns, links, the grid,
+    # the rigid copies, the poses, the mesh copy; the binning's scan-block loops the arch itself):
+    # loops the source checks below cannot see, their serialize= a flag; true on the CPU only
+    assert runtime.one_thread(100, 4096) and not runtime.one_thread(4097, 4096)
     monkeypatch.setattr(runtime, "_arch_in_use", lambda: "cuda")
-    assert not serial_sweep(100)
+    assert not serial_sweep(100) and not runtime.one_thread(1, 4096)
 
 
 def kernels_in_source(root):

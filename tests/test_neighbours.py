@@ -56,16 +56,18 @@ def test_grid_sorted_by_slot_within_buckets_and_complete(serial, monkeypatch):
     assert st["max_bucket"] == np.bincount(bucket[expect]).max()
 
 
-def _lists_checked(cfg, frames=6):
+def _lists_checked(cfg, frames=6, host=True):
     """Run cfg, checking at each sweep and velocity pass that the lists it gathers over are
     whole: where they are fresh, that every member's list holds every slot of the grid walk's 27
     cells closer than the kinds' largest cut-off (so each gather gets the walk's terms); where
     they are stale, that the stage listed them again first (every member's ``x_ref`` is then
     where it stood at the call). Returns the scene's interactions, the member counts checked
-    fresh and the number of stale calls."""
+    fresh and the number of stale calls. ``host``: the CPU's way (each stage reads ``stale`` and
+    lists first); False: the kernels test it themselves (a GPU's way, compiled in on the CPU)."""
     sc = sim_scene(cfg)
     I = sc.particles.interact
     assert I.relist_on_host  # (the CPU's: each stage's relisting tested and launched here)
+    I.relist_on_host = host  # (a compile-time switch: read when the kernels first compile, below)
     checked, relisted = [], []
 
     def check():
@@ -109,18 +111,20 @@ _SAND = {"name": "sand", "shape": "box", "position": [0.6, 0.4, 0.0], "box_size"
 _FLOOR = [{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "restitution": 0.0}]
 
 
-def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit():
+@pytest.mark.parametrize("host", [True, False])
+def test_neighbour_lists_hold_every_neighbour_the_grid_walk_would_visit(host):
     """Each member's neighbours are listed once a step and reused by every sweep and the velocity
     pass while no member has moved past half the skin: checked before each use, in a pouring
     fluid and in grains falling onto a floor, and a member whose neighbours overflow the list
-    walks the grid instead (counted)."""
+    walks the grid instead (counted). Stale lists tested by the stage on the host (the CPU's) or
+    inside the kernels (a GPU's)."""
     s = 0.04
     cfg = {"fps": 30.0, "solver": {"h": 1.0 / 120.0, "impacts": "projected"},
            "emitters": [{"name": "water", "shape": "box", "position": [0.0, 0.3, 0.0], "box_size": [0.3, 0.3, 0.3],
                          "speed": [0.0, 0.5], "bursts": [{"time": 0.0, "count": 400}], "lifetime": 100.0,
                          "interact": {"kind": "fluid", "radius": s / 2, "iterations": 4}}, _SAND],
            "colliders": _FLOOR}
-    I, checked, relisted = _lists_checked(cfg)
+    I, checked, relisted = _lists_checked(cfg, host=host)
     assert I.lists.skin == NeighbourLists.SKIN  # a fluid's narrow skin
     assert len(checked) + len(relisted) >= 6 * 4 * 5 and min(checked) > 0
     assert len(relisted) > 0  # (the pour moves members past the skin within steps)

@@ -281,13 +281,25 @@ def test_whole_rows_under_the_reduced_layer_draw_what_the_per_pixel_path_draws()
     bilateral at every pixel where the row's mask is full — the horizon's band), equals what the
     per-pixel path draws for it, which the BGRA byte order still takes: flames at 320×180 with a
     ¼ layer, the two renders with R and B swapped back, off by at most one step in a handful of
-    pixels (rounding: the compiler may fuse a multiply-add differently), and full-mask rows are
-    there (not vacuous)."""
+    pixels (rounding: the compiler may fuse a multiply-add differently), and rows drawn bilateral
+    whole are there (not vacuous: a full mask, no sprite of the tile's own, and layer texels under
+    them that are not empty; weights taken from the wrong row fail it)."""
     s = drawn_scene("configs/flames.toml", frames=40, size=(320, 180), particle_resolution=0.25)
     rgba = s.render(320, 180).astype(int)
     t = s.renderer.targets(320, 180)
-    masks = t.edge_rows.to_numpy().reshape(-1, 16)[t.edges.to_numpy() == 1]
-    assert (masks == 0xFFFF).sum() >= 16  # rows drawn bilateral whole
+    masks = t.edge_rows.to_numpy().reshape(t.T0, 16)
+    edged, own = t.edges.to_numpy() == 1, t.tile_count.to_numpy()[:t.T0] > 0
+    layer = t.accA.to_numpy()[t.LO:t.LO + t.Wl * t.Hl].reshape(t.Hl, t.Wl, 4)
+    drawn = ~(layer == (0.0, 0.0, 0.0, 1.0)).all(-1)
+    whole = 0
+    for tile in np.flatnonzero(edged & ~own):
+        px0, py0 = (tile % t.TX) * 16, (tile // t.TX) * 16
+        for y in range(py0, min(t.H, py0 + 16)):
+            j0 = int(np.floor((y + 0.5) * t.scale - 0.5))
+            rows = np.clip([j0, j0 + 1], 0, t.Hl - 1)
+            cols = slice(max(0, (px0 - 2) // 4), (px0 + 15 - 2) // 4 + 2)
+            whole += int(masks[tile, y - py0] == 0xFFFF and drawn[rows][:, cols].any())
+    assert whole >= 16, whole  # rows drawn bilateral whole, over smoke
     bgra = s.render(320, 180, bgra=True).astype(int)[..., [2, 1, 0, 3]]
     d = np.abs(rgba - bgra)
     assert d.max() <= 1 and (d > 0).mean() < 1e-3, (d.max(), (d > 0).mean())
@@ -332,8 +344,12 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
     if edge:
         depth[LO:] = np.tile(np.float32([1.0, 10.0]), Wl * Hl // 2)
 
-    def composite(red):
-        acc = nd(v4, np.tile(np.float32([red, 0, 0, 1]), (LO + Wl * Hl + 16, 1)))
+    def composite(red, only_row=None):
+        texels = np.tile(np.float32([red, 0, 0, 1]), (LO + Wl * Hl + 16, 1))
+        if only_row is not None:  # every reduced row empty but this one
+            texels[LO:LO + Wl * Hl] = (0.0, 0.0, 0.0, 1.0)
+            texels[LO + only_row * Wl:LO + (only_row + 1) * Wl, 0] = red
+        acc = nd(v4, texels)
         out = np.zeros(px, np.uint32)
         edges = nd(ti.i32, np.full(TX * TY, -1, np.int32))
         k["composite_tiles"](np.zeros(TX * TY, np.int32), np.zeros(TX * TY, np.int32), acc, acc,
@@ -352,6 +368,14 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
     own = np.zeros(px // 2, np.uint64)  # the frame's own background packed: the empty layer over it
     k["pack_background"](nd(v4, frame_bg), own, W, H, 0, 0, W, H, 1.0, 0)
     np.testing.assert_array_equal(computed, own.view(np.uint32).reshape(H, W))
+    # reduced row 3 alone not empty: the pixel rows reading it (v = (y + ½)/4 − ½ between rows
+    # 2 and 3 or 3 and 4: y = 10..17) are computed, the others copied (a wrong row offset in the
+    # tile's empty-row bits, ``ja − jt``, moves the band)
+    one = composite(1e-30, only_row=3)
+    band = np.zeros((H, W), bool)
+    band[10:18] = True
+    np.testing.assert_array_equal(one[band | body], computed[band | body])
+    np.testing.assert_array_equal(one[~band & ~body], marked[~band & ~body])
 
 
 @pytest.mark.parametrize("schedule", ["tiles", "pixels"])

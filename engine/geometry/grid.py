@@ -116,8 +116,9 @@ class HashGrid:
 
     @ti.func
     def rebuild(self, pos: ti.template(), member: ti.template()):
-        """``build``'s loops, for a caller's kernel to run among its own (each stays a parallel
-        loop at that kernel's top level: call it there, never inside a loop or a branch)."""
+        """``build``'s loops, for a caller's kernel to run among its own (each stays a top-level
+        loop of that kernel, parallel unless ``serial``: call it there, never inside a loop or a
+        branch)."""
         ti.loop_config(serialize=ti.static(self.serial))
         for b in range(self.table):
             self.count[b] = 0

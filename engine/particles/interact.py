@@ -170,8 +170,9 @@ class Interactions(FluidTerms):
         self._launch("finish", h)
 
     def _launch(self, name: str, *args) -> None:
-        """Stage ``name`` (``run_stage``), or a callable set on the instance under that name (a
-        hook wrapping the stage, as tests set)."""
+        """Stage ``name`` (``run_stage``), or a callable set on the instance under that name, run
+        in its place (a test's hook: it wraps ``run_stage``, which on the CPU lists the neighbours
+        again first when they are stale; the kernel alone does not)."""
         own = self.__dict__.get(name)
         if own is not None:
             own(*args)

@@ -170,7 +170,8 @@ def co_mix(acc: ti.template(), k, w):
 @ti.func
 def tile_edge_rows(px0, py0, px1, py1, dep: ti.template(), LO, W, Wl, Hl, s,
                    edge_rows: ti.template(), at):
-    """Where ``lo_sample`` goes bilateral in the tile: ``edge_rows[at + y − py0]`` gets, for each
+    """Where the upsample goes bilateral in the tile (``lo_sample``'s test; the CPU's composite
+    takes these bits as they are, without testing the pixel again): ``edge_rows[at + y − py0]`` gets, for each
     pixel row y, a mask with bit x − px0 set where ``quad_is_edge`` holds at pixel (x, y) — none
     unless ``lo_edge`` (the tile's test) holds — and the return is whether any bit is set. Where
     a bit is clear the upsample is bilinear, the value the hoisted bilinear path gives. A

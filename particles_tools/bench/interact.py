@@ -125,8 +125,8 @@ def grid_rows(n: int, repeats: int):
     st = G.stats()
     pos0 = S.particle_pos.to_numpy()
 
-    def sweep():
-        I.sweep(h)
+    def sweep():  # (the stage: on the CPU it lists again first when the lists are stale)
+        I.run_stage("sweep", h)
 
     t_sweep = time_median(sweep, repeats)
     S.particle_pos.from_numpy(pos0)
