@@ -1,6 +1,6 @@
 """The renderer: two schedules, one image; determinism; sizes, cameras and overlays without
 recompiling; what the output array holds. (The reduced and coarse layers, their upsample and
-the composite's skips: ``test_reduced_layer.py``.)"""
+the composite's skips: ``test_reduced_layer.py`` and ``test_upsample.py``.)"""
 import numpy as np
 import pytest
 
