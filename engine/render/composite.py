@@ -38,8 +38,8 @@ from .. import runtime
 from ..launch import fast
 from .splat_kernels import EMPTY_LAYER, ND_PAIRS, build_splat
 from .sprites import TILE
-from .upsample import (ND_F, ND_I1, ND_V4, empty_rows, lo_bilateral, lo_edge, lo_near, lo_row, lo_rows, lo_sample,
-                       row_lerp, row_place, tile_edge_rows)
+from .upsample import (ND_F, ND_I1, ND_V4, bilateral_mix, empty_rows, lo_bilateral, lo_edge, lo_near, lo_row,
+                       lo_rows, lo_sample, row_lerp, row_place, tile_edge_rows)
 
 # the tone-map table: bins of f32 linear values by their bits (exponent and top LUT_BITS mantissa
 # bits: 1,024 bins an octave, each ≤ 0.1 % wide) over [2^LUT_MIN_EXP, 8): below, black (ACES·sRGB
@@ -199,13 +199,8 @@ def _build(uses_add: bool, uses_alpha: bool):
             b = (1.0 - fx) * tb[n] + fx * tb[n + 1]
             low = (1.0 - fy) * a + fy * b
             if bilateral != 0:
-                z = dep[k0 + dx]
-                iz = 1.0 / z
-                w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(za[n] - z) * iz)
-                w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(za[n + 1] - z) * iz)
-                w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(zb[n] - z) * iz)
-                w11 = fx * fy / (1e-3 + ti.abs(zb[n + 1] - z) * iz)
-                low = (w00 * ta[n] + w10 * ta[n + 1] + w01 * tb[n] + w11 * tb[n + 1]) / (w00 + w10 + w01 + w11)
+                low = bilateral_mix(fx, fy, dep[k0 + dx], za[n], za[n + 1], zb[n], zb[n + 1], ta[n], ta[n + 1],
+                                    tb[n], tb[n + 1])
             vals[dx] = finish(bgc[k0 + dx], low, EMPTY_LAYER, exposure, mode)
         for dx in ti.static(range(TILE)):
             out[k0 + dx] = vals[dx]

@@ -72,13 +72,20 @@ def lo_bilateral(px, py, z, lo: ti.template(), depth_lo: ti.template(), LO, Wl, 
     ra, rb = LO + ja * Wl, LO + jb * Wl
     z00, z10 = depth_lo[ra + xa], depth_lo[ra + xb]
     z01, z11 = depth_lo[rb + xa], depth_lo[rb + xb]
+    return bilateral_mix(fx, fy, z, z00, z10, z01, z11, lo[ra + xa], lo[ra + xb], lo[rb + xa], lo[rb + xb])
+
+
+@ti.func
+def bilateral_mix(fx, fy, z, z00, z10, z01, z11, t00, t10, t01, t11):
+    """The four texels t (vec4) of depths z.. around a pixel of depth z at fractions (fx, fy),
+    each weighing bilinear × 1 / (10⁻³ + |z_texel − z| / z), normalised (``lo_bilateral``; the
+    composite's whole rows take it too, with their loads hoisted)."""
     iz = 1.0 / z
     w00 = (1.0 - fx) * (1.0 - fy) / (1e-3 + ti.abs(z00 - z) * iz)
     w10 = fx * (1.0 - fy) / (1e-3 + ti.abs(z10 - z) * iz)
     w01 = (1.0 - fx) * fy / (1e-3 + ti.abs(z01 - z) * iz)
     w11 = fx * fy / (1e-3 + ti.abs(z11 - z) * iz)
-    return (w00 * lo[ra + xa] + w10 * lo[ra + xb] + w01 * lo[rb + xa] + w11 * lo[rb + xb]) \
-        / (w00 + w10 + w01 + w11)
+    return (w00 * t00 + w10 * t10 + w01 * t01 + w11 * t11) / (w00 + w10 + w01 + w11)
 
 
 @ti.func
