@@ -191,6 +191,22 @@ def test_a_new_render_size_and_a_warmed_up_scene_compile_nothing():
 
 
 @pytest.mark.slow
+def test_a_warmed_up_scene_takes_single_steps_and_fused_runs_without_compiling():
+    """Steps with no birth due are fused into one launch, the others launched one by one
+    (ParticleSystem.fixed_step): the warm-up compiles both (ParticleSystem.warm_steps), whichever
+    its own steps took, so a slow emitter's first steps, with births due now and then, compile
+    nothing."""
+    s = ParticleScene(dict(fps=60, render={"width": 64, "height": 36},
+                           emitters=[{"name": "e", "rate": 20.0, "lifetime": 1.0}]))
+    s.warm_up()
+    before = compiled()
+    for _ in range(30):
+        s.step(1 / 60)
+    assert s.live_count() > 0 and compiled() == before
+    s.close()
+
+
+@pytest.mark.slow
 def test_add_emitter_of_a_compiled_kind_writes_spare_rows_and_a_restart_takes_it_away():
     data = dict(fps=60, render={"width": 48, "height": 32},
                 emitters=[{"name": "e", "effect": "sparks", "rate": 200.0}])

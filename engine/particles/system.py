@@ -182,6 +182,17 @@ class ParticleSystem(SystemBase):
         self.emitters.carry_local(t, t0 + (j + k) * h)
         return k
 
+    def warm_steps(self, t: float, h: float) -> None:
+        """Compile both launches :meth:`fixed_step` takes, a single step and a fused run of them:
+        which ones a warm-up's own steps take depends on when its births fall (a burst, then
+        none due: one run), and a game's first steps would compile the other. One step of h at t
+        each (the caller resets); nothing where runs are never fused (step doubling, events,
+        interactions, potentials: a step a launch, compiled by any step)."""
+        if self.layout.capacity and not self.adaptive and not self.emitters.uses_events \
+                and self.interact is None and not self.potentials:
+            integrate.step_fixed(self.integrator, t, h)
+            integrate.step_fixed_run(self.integrator, t, h, 0, 1)
+
     def attempt(self, t: float, h: float) -> float:
         self.emitters.emit(t, h)  # newborns wait (negative age) if the attempt is retried shorter
         self._move_colliders(t, t + h)

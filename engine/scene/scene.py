@@ -221,6 +221,7 @@ class Scene:
         self.live_particles()
         self.live_count()
         if self.particles is not None:
+            self.particles.warm_steps(self.t, self.cfg.solver.h)
             self.particles.contacts()
             self.particles.emitters.carry_local(0.0, 0.0, compile_only=True)
         for body in self.bodies:
