@@ -207,6 +207,29 @@ def test_a_warmed_up_scene_takes_single_steps_and_fused_runs_without_compiling()
 
 
 @pytest.mark.slow
+def test_a_warmed_up_scene_draws_its_first_smoke_in_the_reduced_layer_without_compiling():
+    """A frame with nothing at the reduced and coarse levels takes smaller kernels than one that
+    draws there (engine.render.renderer.Renderer._splat): warm_up compiles both, so puffs that
+    grow past the layer's size only after the warm-up's step compile nothing either."""
+    s = ParticleScene(dict(fps=60, render={"width": 320, "height": 180, "particle_resolution": 0.25},
+                           camera={"position": [0.0, 1.0, 4.0], "look_at": [0.0, 1.0, 0.0]},
+                           emitters=[{"name": "puff", "position": [0.0, 1.0, 0.0], "speed": [0.0, 0.1],
+                                      "rate": 40.0, "lifetime": 1.0, "blend": "alpha",
+                                      "size": [[0.0, 0.005], [0.4, 2.5]], "alpha": [[0.0, 0.5]]}]))
+    s.warm_up(sizes=[(320, 180)])
+    before = compiled()
+    levels = set()
+    for _ in range(40):
+        s.step(1 / 60)
+        s.render()
+        info = s.scene.renderer.records.spr_info.to_numpy()
+        levels |= set(np.unique(info[info[:, 0] != 0, 2]).tolist())
+    assert {0, 1, 2} <= levels  # tiny at birth (full level), then the reduced and coarse levels
+    assert compiled() == before
+    s.close()
+
+
+@pytest.mark.slow
 def test_add_emitter_of_a_compiled_kind_writes_spare_rows_and_a_restart_takes_it_away():
     data = dict(fps=60, render={"width": 48, "height": 32},
                 emitters=[{"name": "e", "effect": "sparks", "rate": 200.0}])

@@ -266,7 +266,12 @@ def _build(uses_add: bool, uses_alpha: bool):
         2 / s pixels past its edge — or where soft bodies drew this frame or the last (``dirty``,
         ``dirty_prev``: a tile next to such a tile too).
 
-        The reduced layer (scale s = 1/k, k = 2 or 4) is read from its texels in ``accA``: each
+        ``k`` 0: this frame draws no reduced layer (``has_lo`` 0); its code is not compiled in, so a
+        scene that never draws one (sparks, galaxy) does not build it: in sparks' warm start the
+        composite's first call (its front end and the cached kernel's load) took 0.48 s, 0.06 s so
+        (``Renderer.warm_levels`` compiles both for a loading screen).
+
+        The reduced layer (scale s = 1/k, k = 2 or 4; ``has_lo`` 1) is read from its texels in ``accA``: each
         pixel row's two reduced rows interpolated along x (``upsample.row_lerp``; a whole row of
         a tile loads its TILE/k + 2 texels of each once, ``reduced_row``), then between them.
         Before, a kernel of its own wrote every needed row interpolated at every full-resolution
@@ -292,7 +297,7 @@ def _build(uses_add: bool, uses_alpha: bool):
             if stale:
                 edges[t] = -1
             near = 0
-            if has_lo != 0:
+            if ti.static(k != 0):
                 near = lo_near(px0, py0, px1, py1, touched_lo, Wl, Hl, TXl, s)
             if n == 0 and near == 0 and dirty[t] == 0:
                 if copy != 2:
@@ -302,70 +307,78 @@ def _build(uses_add: bool, uses_alpha: bool):
                 drawn = 0  # the rows of this tile its own sprites may have drawn in
                 if n > 0:
                     drawn = full_rows[t]
-                edge = 0
-                if near != 0:
-                    edge = edges[t]
-                    if edge < 0:
-                        edge = tile_edge_rows(px0, py0, px1, py1, dep, W * H, W, Wl, Hl, s, edge_rows,
-                                              t * TILE)
-                        edges[t] = edge
                 ab, aw = tile_rows(px0, py0, px1, py1, W)
-                jt = ti.max(lo_row(py0, k), 0)  # the tile's first reduced row
-                empty = 0  # bit j - jt: reduced row j is the empty layer under the tile
-                if near != 0 and dirty[t] == 0 and drawn != (1 << (py1 - py0 + 1)) - 1:
-                    empty = empty_rows(accA, jt, ti.min(lo_row(py1, k) + 1, Hl - 1), px0, px1, W * H, Wl, k)
+                edge, jt, empty = 0, 0, 0
+                if ti.static(k != 0):
+                    if near != 0:
+                        edge = edges[t]
+                        if edge < 0:
+                            edge = tile_edge_rows(px0, py0, px1, py1, dep, W * H, W, Wl, Hl, s, edge_rows,
+                                                  t * TILE)
+                            edges[t] = edge
+                    jt = ti.max(lo_row(py0, k), 0)  # the tile's first reduced row
+                    # bit j - jt: reduced row j is the empty layer under the tile
+                    if near != 0 and dirty[t] == 0 and drawn != (1 << (py1 - py0 + 1)) - 1:
+                        empty = empty_rows(accA, jt, ti.min(lo_row(py1, k) + 1, Hl - 1), px0, px1, W * H, Wl, k)
                 for y in range(py0, py1 + 1):
-                    # the upsample's row terms, hoisted by hand (two loads and a lerp per pixel
-                    # where it is bilinear: every pixel whose bit in the row's mask is clear)
-                    v = (y + 0.5) * s - 0.5
-                    j0 = ti.cast(ti.floor(v), ti.i32)
-                    fy = v - j0
-                    ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
-                    ra, rb = W * H + ja * Wl, W * H + jb * Wl  # (the reduced rows' first texels)
-                    mask = 0
-                    if edge != 0:
-                        mask = edge_rows[t * TILE + y - py0]
                     full_here = (drawn >> (y - py0)) & 1
-                    if full_here == 0 and near != 0 and dirty[t] == 0 and (empty >> (ja - jt)) & (empty >> (jb - jt)) & 1 != 0:
-                        # the reduced layer alone, both its rows the empty layer here
-                        # (``empty``: upsample.empty_rows), and no body drew in the tile (``bgc``
-                        # is then the frame's, bodies drawn in, not what was packed): the packed
-                        # background, bit for bit — also where the upsample is bilateral (``mask``):
-                        # its four texels are then the empty layer, whose weighted mean is itself
-                        # (RGB 0·w = 0; T: Σ w·1 / Σ w, one sum over the other). The horizon's
-                        # band of bilateral rows, where the receding floor's depth grows by more
-                        # than 10 % a texel, is mostly such rows (flames.toml at 1280×720: three
-                        # rows of tiles, 56k pixels)
-                        background_row(bg_packed, out, out64, copy, y, px0, px1, W)
-                    elif (full_here == 0 and near != 0 and (mask == 0 or mask == (1 << TILE) - 1)
-                          and px1 - px0 == TILE - 1 and mode == 0):
-                        # the common case under smoke: the reduced layer alone, bilinear (or, with a
-                        # full mask, bilateral at every pixel: the horizon's band), a whole row of
-                        # the tile, opaque RGBA (the usual mode) with the mode a constant: its tests
-                        # and swaps folded away (a branch per pixel cost the unrolled row ~1 ms a
-                        # frame at 1280×720; a second unrolled copy for the other modes, ~0.15 s of
-                        # every start: they take the loops)
-                        reduced_row(accA, dep, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, Wl, k,
-                                    mask)
-                    elif full_here == 0 and near != 0 and mask == 0:
-                        for x in range(px0, px1 + 1):
-                            low = (1.0 - fy) * row_lerp(accA, ra, x, Wl, k) + fy * row_lerp(accA, rb, x, Wl, k)
-                            out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure, mode)
-                    elif full_here == 0 and near == 0 and dirty[t] == 0:
-                        background_row(bg_packed, out, out64, copy, y, px0, px1, W)
-                    else:
-                        for x in range(px0, px1 + 1):
-                            q = y * W + x
-                            full = EMPTY_LAYER
-                            if full_here != 0:
-                                full = acc_layer(accA, accB, ab + y * aw + x, shading)
-                            low = EMPTY_LAYER
-                            if near != 0:
-                                if (mask >> (x - px0)) & 1 != 0:
-                                    low = lo_bilateral(x, y, dep[q], accA, dep, W * H, Wl, Hl, s)
-                                else:
+                    fy, ra, rb, mask = 0.0, 0, 0, 0
+                    done = 0  # the row drawn under the reduced layer alone
+                    if ti.static(k != 0):
+                        # the upsample's row terms, hoisted by hand (two loads and a lerp per pixel
+                        # where it is bilinear: every pixel whose bit in the row's mask is clear)
+                        v = (y + 0.5) * s - 0.5
+                        j0 = ti.cast(ti.floor(v), ti.i32)
+                        fy = v - j0
+                        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+                        ra, rb = W * H + ja * Wl, W * H + jb * Wl  # (the reduced rows' first texels)
+                        if edge != 0:
+                            mask = edge_rows[t * TILE + y - py0]
+                        if full_here == 0 and near != 0:
+                            done = 1
+                            if dirty[t] == 0 and (empty >> (ja - jt)) & (empty >> (jb - jt)) & 1 != 0:
+                                # both its rows the empty layer here (``empty``: upsample.empty_rows),
+                                # and no body drew in the tile (``bgc`` is then the frame's, bodies
+                                # drawn in, not what was packed): the packed background, bit for bit
+                                # — also where the upsample is bilateral (``mask``): its four texels
+                                # are then the empty layer, whose weighted mean is itself (RGB 0·w =
+                                # 0; T: Σ w·1 / Σ w, one sum over the other). The horizon's band of
+                                # bilateral rows, where the receding floor's depth grows by more
+                                # than 10 % a texel, is mostly such rows (flames.toml at 1280×720:
+                                # three rows of tiles, 56k pixels)
+                                background_row(bg_packed, out, out64, copy, y, px0, px1, W)
+                            elif (mask == 0 or mask == (1 << TILE) - 1) and px1 - px0 == TILE - 1 and mode == 0:
+                                # the common case under smoke: bilinear (or, with a full mask,
+                                # bilateral at every pixel: the horizon's band), a whole row of the
+                                # tile, opaque RGBA (the usual mode) with the mode a constant: its
+                                # tests and swaps folded away (a branch per pixel cost the unrolled
+                                # row ~1 ms a frame at 1280×720; a second unrolled copy for the
+                                # other modes, ~0.15 s of every start: they take the loops)
+                                reduced_row(accA, dep, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, Wl, k,
+                                            mask)
+                            elif mask == 0:
+                                for x in range(px0, px1 + 1):
                                     low = (1.0 - fy) * row_lerp(accA, ra, x, Wl, k) + fy * row_lerp(accA, rb, x, Wl, k)
-                            out[q] = finish(bgc[q], low, full, exposure, mode)
+                                    out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure, mode)
+                            else:
+                                done = 0  # (some pixels bilateral: the general loop below)
+                    if done == 0:
+                        if full_here == 0 and near == 0 and dirty[t] == 0:
+                            background_row(bg_packed, out, out64, copy, y, px0, px1, W)
+                        else:
+                            for x in range(px0, px1 + 1):
+                                q = y * W + x
+                                full = EMPTY_LAYER
+                                if full_here != 0:
+                                    full = acc_layer(accA, accB, ab + y * aw + x, shading)
+                                low = EMPTY_LAYER
+                                if ti.static(k != 0):
+                                    if near != 0:
+                                        if (mask >> (x - px0)) & 1 != 0:
+                                            low = lo_bilateral(x, y, dep[q], accA, dep, W * H, Wl, Hl, s)
+                                        else:
+                                            low = (1.0 - fy) * row_lerp(accA, ra, x, Wl, k) + fy * row_lerp(accA, rb, x, Wl, k)
+                                out[q] = finish(bgc[q], low, full, exposure, mode)
 
     @ti.kernel
     def composite_pixels(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,

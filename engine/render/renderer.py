@@ -97,6 +97,7 @@ class Renderer:
             from .mesh import MeshLayer
 
             self.mesh = MeshLayer(bodies)
+        self._all_levels = False  # (warm_up: a frame takes the reduced and coarse levels' kernels)
         self._targets = OrderedDict()  # (W, H, layer scale) -> FrameTargets, most recent last
         self.last_pairs = self.last_reduced_pairs = 0  # (tile-sprite pairs; those of levels 1 and 2)
 
@@ -202,18 +203,30 @@ class Renderer:
             self._k["composite_tiles"](t.tile_count, t.full_rows, t.accA, t.accB, bgc, dep, t.bg_packed,
                                        packed, *untouched_tiles(t, image, packed), t.dirty, t.dirty_prev if t.mesh else t.dirty,
                                        t.touched_lo, t.edges, t.edge_rows, ex0, ey0, ex1, ey1, *common,
-                                       round(1 / t.scale) if t.has_lo else 2)
+                                       round(1 / t.scale) if has_lo else 0)
         else:
             self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,
                                         dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)
         return image
 
-    def splat_tiles(self, t: FrameTargets, dep, t_lo: int, t_hi: int) -> None:
-        """The per-tile splat of the tiles [t_lo, t_hi) (engine.render.composite.splat_tiles)."""
+    def warm_levels(self, camera, width: int, height: int) -> None:
+        """Where this size has a reduced layer, a render through the reduced and coarse levels'
+        kernels (the same picture), so that they are compiled even if the scene draws nothing
+        there yet: a frame with nothing at those levels takes smaller kernels (``_splat``)."""
+        if self.has_particles and self.targets(width, height).has_lo:
+            self._all_levels = True
+            try:
+                self.render(camera, width, height)
+            finally:
+                self._all_levels = False
+
+    def splat_tiles(self, t: FrameTargets, dep, t_lo: int, t_hi: int, levels: bool = True) -> None:
+        """The per-tile splat of the tiles [t_lo, t_hi) (engine.render.splat_kernels.splat_tiles;
+        ``levels`` False: full-level tiles only, t_hi ≤ T0)."""
         if t_hi > t_lo:
             self._k["splat_tiles"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_lo,
                                    t.touched_co, t.full_rows, t_lo, t_hi, t.T0, t.TX, t.W, t.H, t.T1, t.TXl, t.Wl, t.Hl,
-                                   t.TXc, t.Wc, t.Hc, self.shading)
+                                   t.TXc, t.Wc, t.Hc, self.shading, bool(levels))
 
     def _splat(self, t: FrameTargets, cam, dep, blend: float = 1.0) -> int:
         """Sprites, binning, and the splat (per tile: both levels; per pixel: the reduced level,
@@ -229,24 +242,32 @@ class Renderer:
         if total > t.pair_capacity:  # an ndarray: growing it recompiles nothing
             t.grow_pairs(int(total * 1.25) + 1024)
         self.last_pairs, self.last_reduced_pairs = total, reduced
-        if total == 0 and t.lo_clear:
-            # nothing to draw, and no reduced tile was drawn at these targets' last splat (each
-            # ``touched_lo`` is 0): every tile count is 0, so no accumulator is read — no
-            # scatter, splat or reduced rows (an empty frame's fixed cost)
+        if total == 0 and t.lo_clear and not self._all_levels:
+            # nothing to draw, and no reduced or coarse tile was drawn at these targets' last
+            # splat (each ``touched_lo`` and ``touched_co`` is 0): every tile count is 0, so no
+            # accumulator is read — no scatter, splat or reduced rows (an empty frame's fixed cost)
             return 0
         self._scatter(t.pairs, t.hist, t.tile_start, t.T0, t.T1, t.TX, t.TXl, t.TXc)
         if self.schedule == "tiles":
-            self.splat_tiles(t, dep, t.T0 + t.T1, t.T)  # the coarse level first: the reduced one reads it
-            self.splat_tiles(t, dep, 0, t.T0 + t.T1)
+            if reduced == 0 and t.lo_clear and not self._all_levels:
+                # nothing at the reduced and coarse levels, now or at the last splat: their tiles
+                # are all clear already, so only the full level's are splatted, by a kernel
+                # without the other levels' code (sparks and galaxy never build it; one parallel
+                # loop less a frame)
+                self.splat_tiles(t, dep, 0, t.T0, levels=False)
+            else:
+                self.splat_tiles(t, dep, t.T0 + t.T1, t.T)  # the coarse level first: the reduced one reads it
+                self.splat_tiles(t, dep, 0, t.T0 + t.T1)
         elif t.has_lo:
             self._k["splat_pixels_co"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_co,
                                        t.T0 + t.T1, t.LC, t.T2, t.TXc, t.Wc, t.Hc)
             self._k["splat_pixels_lo"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_lo,
                                        t.touched_co, t.T0, W, H, t.T1, t.TXl, t.Wl, t.Hl, t.TXc, t.Wc, t.Hc,
                                        self.shading)
-        # (every splat sets each touched_lo and touched_co to whether its tile was drawn)
-        t.lo_clear = total == 0
+        # (every splat sets each touched_lo and touched_co to whether its tile was drawn: with no
+        # pair at those levels, all of them to 0)
+        t.lo_clear = reduced == 0
         # no sprite in the reduced or coarse level this frame (sparks, galaxy: small sprites only):
         # every reduced tile was just splatted empty, so the composite need not read that layer and
         # its rows need not be interpolated (the empty layer over the background is the background)
-        return int(t.has_lo and reduced > 0)
+        return int(t.has_lo and (reduced > 0 or self._all_levels))

@@ -214,7 +214,7 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                     dep: ND_F, touched_lo: ND_I1, touched_co: ND_I1, full_rows: ND_I1, t_lo: ti.i32,
                     t_hi: ti.i32,
                     T0: ti.i32, TX: ti.i32, W: ti.i32, H: ti.i32, T1: ti.i32, TXl: ti.i32, Wl: ti.i32,
-                    Hl: ti.i32, TXc: ti.i32, Wc: ti.i32, Hc: ti.i32, shading: ti.f32):
+                    Hl: ti.i32, TXc: ti.i32, Wc: ti.i32, Hc: ti.i32, shading: ti.f32, levels: ti.template()):
         """Per tile (the CPU's schedule), the tiles [t_lo, t_hi) of the index space (full level,
         then reduced, then coarse): clear and splat the tile's sprites into the accumulators (and
         keep a full-level tile's mask of the rows they may have drawn in, ``full_rows``, for the
@@ -223,15 +223,19 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
         adds the coarse level's sums under it (``with_coarse``) and resolves each texel to its
         layer (RGB, T) in place. A reduced or coarse tile emptied since the last frame is reset
         (to the empty layer, or the empty sums), so the upsamples may read any texel without
-        asking whether its tile was drawn."""
+        asking whether its tile was drawn. ``levels`` False: the full level's tiles alone (t_hi ≤
+        T0), for a frame with no sprite at the other two while every tile of theirs is already
+        clear (``Renderer._splat``): their code is not compiled in, so a scene that never draws
+        them (sparks, galaxy) does not build it, at any start."""
         ti.loop_config(block_dim=1)
         LO, LC = W * H, W * H + Wl * Hl
         for t in range(t_lo, t_hi):
             lvl, tt, tx_n, Wk, Hk, base = 0, t, TX, W, H, 0
-            if t >= T0 + T1:
-                lvl, tt, tx_n, Wk, Hk, base = 2, t - T0 - T1, TXc, Wc, Hc, LC
-            elif t >= T0:
-                lvl, tt, tx_n, Wk, Hk, base = 1, t - T0, TXl, Wl, Hl, LO
+            if ti.static(levels):
+                if t >= T0 + T1:
+                    lvl, tt, tx_n, Wk, Hk, base = 2, t - T0 - T1, TXc, Wc, Hc, LC
+                elif t >= T0:
+                    lvl, tt, tx_n, Wk, Hk, base = 1, t - T0, TXl, Wl, Hl, LO
             n = tile_count[t]
             px0, py0 = (tt % tx_n) * TILE, (tt // tx_n) * TILE
             px1, py1 = ti.min(Wk - 1, px0 + TILE - 1), ti.min(Hk - 1, py0 + TILE - 1)
@@ -243,34 +247,35 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                                   base, Wk, ab, aw)
                 if lvl == 0:
                     full_rows[t] = rows
-            if lvl == 2:
-                if n == 0 and touched_co[tt] != 0:
-                    for y in range(py0, py1 + 1):
-                        for k in range(base + y * Wk + px0, base + y * Wk + px1 + 1):
-                            accA[k] = EMPTY_LAYER
-                            if ti.static(uses_alpha):
-                                accB[k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
-                touched_co[tt] = ti.select(n > 0, 1, 0)
-            elif lvl == 1:
-                near = lo_near(px0, py0, px1, py1, touched_co, Wc, Hc, TXc, 0.5)
-                if near != 0:
-                    near = co_drawn(px0, py0, px1, py1, accA, accB, LC, Wc, Hc)
-                if n > 0 or near != 0 or touched_lo[tt] != 0:
-                    for y in range(py0, py1 + 1):
-                        for x in range(px0, px1 + 1):
-                            k = base + y * Wk + x
-                            v = EMPTY_LAYER
-                            if n > 0 or near != 0:
-                                A, B = EMPTY_LAYER, ti.Vector([0.0, 0.0, 0.0, 0.0])
-                                if n > 0:
-                                    A = accA[k]
-                                    if ti.static(uses_alpha):
-                                        B = accB[k]
-                                if near != 0:
-                                    A, B = with_coarse(A, B, x, y, dep[k], accA, accB, dep, LC, Wc, Hc)
-                                v = layer(A, B, shading)
-                            accA[k] = v
-                touched_lo[tt] = ti.select(n > 0 or near != 0, 1, 0)
+            if ti.static(levels):
+                if lvl == 2:
+                    if n == 0 and touched_co[tt] != 0:
+                        for y in range(py0, py1 + 1):
+                            for k in range(base + y * Wk + px0, base + y * Wk + px1 + 1):
+                                accA[k] = EMPTY_LAYER
+                                if ti.static(uses_alpha):
+                                    accB[k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+                    touched_co[tt] = ti.select(n > 0, 1, 0)
+                elif lvl == 1:
+                    near = lo_near(px0, py0, px1, py1, touched_co, Wc, Hc, TXc, 0.5)
+                    if near != 0:
+                        near = co_drawn(px0, py0, px1, py1, accA, accB, LC, Wc, Hc)
+                    if n > 0 or near != 0 or touched_lo[tt] != 0:
+                        for y in range(py0, py1 + 1):
+                            for x in range(px0, px1 + 1):
+                                k = base + y * Wk + x
+                                v = EMPTY_LAYER
+                                if n > 0 or near != 0:
+                                    A, B = EMPTY_LAYER, ti.Vector([0.0, 0.0, 0.0, 0.0])
+                                    if n > 0:
+                                        A = accA[k]
+                                        if ti.static(uses_alpha):
+                                            B = accB[k]
+                                    if near != 0:
+                                        A, B = with_coarse(A, B, x, y, dep[k], accA, accB, dep, LC, Wc, Hc)
+                                    v = layer(A, B, shading)
+                                accA[k] = v
+                    touched_lo[tt] = ti.select(n > 0 or near != 0, 1, 0)
 
     @ti.kernel
     def splat_pixels_co(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,

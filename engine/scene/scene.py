@@ -228,7 +228,8 @@ class Scene:
             body.positions()
             body.contacts()
         for w, h in sizes:
-            self.render(w, h)
+            self.render(w, h)  # (refused where the scene was built with render=False)
+            self.renderer.warm_levels(self.camera, w, h)
         self.reset()
 
     def save_positions(self) -> None:
