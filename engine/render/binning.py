@@ -23,6 +23,7 @@ import taichi as ti
 
 from .. import runtime
 from ..launch import fast
+from ..spread import TASK, item, rounds, tasks
 
 SCAN_BLOCK = 64  # tiles per block of the two-level scan
 vec16 = ti.types.vector(16, ti.f32)
@@ -45,6 +46,7 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
     # the two loops over the scan's blocks (T/64 of them: 74 at 1280×720) on the launching thread
     # on the CPU: each was a hand-off to the thread pool for a few dozen adds (engine.runtime.one_thread)
     blocks_serial = runtime._arch_in_use() == "cpu"
+    NT = tasks()
 
     @ti.func
     def tile_base(level, T0, T1, TX0, TX1, TX2):
@@ -64,19 +66,22 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
         """Steps 1–3 in one launch (a kernel's top-level loops run one after another, each a
         parallel pass: a launch costs ~0.1 ms here, more than a step's work); returns the number
         of tile–sprite pairs and how many of them are in the reduced and coarse levels' tiles."""
-        # 1. count
-        ti.loop_config(block_dim=1)  # one chunk per task
-        for c in range(chunks):
-            for t in range(T):
-                hist[c, t] = 0
-            for i in range(c * chunk, ti.min(cap, (c + 1) * chunk)):
-                if info[i][0] != 0:
-                    b = tiles[i]
-                    base, tx_n = tile_base(info[i][2], T0, T1, TX0, TX1, TX2)
-                    for ty in range(b[1], b[3] + 1):
-                        for tx in range(b[0], b[2] + 1):
-                            t = base + ty * tx_n + tx
-                            hist[c, t] = hist[c, t] + 1  # (not +=: that compiles to an atomic)
+        # 1. count (the chunks spread over the CPU's tasks: engine.spread; in order, all 16 were
+        # one task of 512, a thread's alone)
+        for s in range(NT * TASK):
+            for r in range(rounds(chunks, NT)):
+                c = item(s, r, NT)
+                if c < chunks:
+                    for t in range(T):
+                        hist[c, t] = 0
+                    for i in range(c * chunk, ti.min(cap, (c + 1) * chunk)):
+                        if info[i][0] != 0:
+                            b = tiles[i]
+                            base, tx_n = tile_base(info[i][2], T0, T1, TX0, TX1, TX2)
+                            for ty in range(b[1], b[3] + 1):
+                                for tx in range(b[0], b[2] + 1):
+                                    t = base + ty * tx_n + tx
+                                    hist[c, t] = hist[c, t] + 1  # (not +=: that compiles to an atomic)
         # 2. offsets
         ti.loop_config(serialize=ti.static(blocks_serial))
         for b in range(NB):
@@ -111,25 +116,27 @@ def build_binning_kernels(rec, capacity: int, chunks: int):
                 hist: ti.types.ndarray(dtype=ti.i32, ndim=2),
                 tile_start: ti.types.ndarray(dtype=ti.i32, ndim=1), T0: ti.i32, T1: ti.i32,
                 TX0: ti.i32, TX1: ti.i32, TX2: ti.i32):
-        ti.loop_config(block_dim=1)
-        for c in range(chunks):
-            for i in range(c * chunk, ti.min(cap, (c + 1) * chunk)):
-                nf = info[i]
-                if nf[0] != 0:
-                    b = tiles[i]
-                    base, tx_n = tile_base(nf[2], T0, T1, TX0, TX1, TX2)
-                    g, lk, tl = geom[i], slook[i], tail[i]
-                    # a streak's 1/L² (for projecting pixels on it); 0 for a disc
-                    d2 = (tl[1] - g[0]) ** 2 + (tl[2] - g[1]) ** 2
-                    inv_l2 = ti.select(nf[0] < 0 and d2 > 1e-6, 1.0 / ti.max(d2, 1e-6), 0.0)
-                    rec16 = ti.Vector([g[0], g[1], g[2], g[3], lk[0], lk[1], lk[2], lk[3],
-                                       tl[0], tl[1], tl[2], tl[3], ti.cast(nf[0], ti.f32),
-                                       ti.cast(nf[1], ti.f32), softf[i], inv_l2])
-                    for ty in range(b[1], b[3] + 1):
-                        for tx in range(b[0], b[2] + 1):
-                            t = base + ty * tx_n + tx
-                            k = hist[c, t]
-                            pairs[tile_start[t] + k] = rec16
-                            hist[c, t] = k + 1
+        for s in range(NT * TASK):  # (the chunks spread over the CPU's tasks, as in tally)
+            for r in range(rounds(chunks, NT)):
+                c = item(s, r, NT)
+                if c < chunks:
+                    for i in range(c * chunk, ti.min(cap, (c + 1) * chunk)):
+                        nf = info[i]
+                        if nf[0] != 0:
+                            b = tiles[i]
+                            base, tx_n = tile_base(nf[2], T0, T1, TX0, TX1, TX2)
+                            g, lk, tl = geom[i], slook[i], tail[i]
+                            # a streak's 1/L² (for projecting pixels on it); 0 for a disc
+                            d2 = (tl[1] - g[0]) ** 2 + (tl[2] - g[1]) ** 2
+                            inv_l2 = ti.select(nf[0] < 0 and d2 > 1e-6, 1.0 / ti.max(d2, 1e-6), 0.0)
+                            rec16 = ti.Vector([g[0], g[1], g[2], g[3], lk[0], lk[1], lk[2], lk[3],
+                                               tl[0], tl[1], tl[2], tl[3], ti.cast(nf[0], ti.f32),
+                                               ti.cast(nf[1], ti.f32), softf[i], inv_l2])
+                            for ty in range(b[1], b[3] + 1):
+                                for tx in range(b[0], b[2] + 1):
+                                    t = base + ty * tx_n + tx
+                                    k = hist[c, t]
+                                    pairs[tile_start[t] + k] = rec16
+                                    hist[c, t] = k + 1
 
     return fast(tally), fast(scatter)  # (engine.launch: without the per-argument Python)

@@ -36,10 +36,11 @@ import taichi as ti
 
 from .. import runtime
 from ..launch import fast
+from ..spread import TASK, item, rounds, tasks
 from .splat_kernels import EMPTY_LAYER, ND_PAIRS, build_splat
 from .sprites import TILE
 from .upsample import (ND_F, ND_I1, ND_V4, bilateral_mix, empty_rows, lo_bilateral, lo_edge, lo_near, lo_row,
-                       lo_rows, lo_sample, row_lerp, row_place, tile_edge_rows)
+                       lo_rows, lo_sample, row_place, rows_lerp, tile_edge_rows)
 
 # the tone-map table: bins of f32 linear values by their bits (exponent and top LUT_BITS mantissa
 # bits: 1,024 bins an octave, each ≤ 0.1 % wide) over [2^LUT_MIN_EXP, 8): below, black (ACES·sRGB
@@ -109,6 +110,7 @@ def _build(uses_add: bool, uses_alpha: bool):
     lut = ti.field(ti.u8, shape=LUT_SIZE)
     llvm = runtime._arch_in_use() in ("cpu", "cuda")  # (LLVM's max returns the operand not NaN)
     lut.from_numpy(tonemap_table().astype(np.uint8))
+    NT = tasks()  # (the per-tile loop's tasks: engine.spread)
 
     @ti.func
     def tone(x):
@@ -284,101 +286,105 @@ def _build(uses_add: bool, uses_alpha: bool):
         empty full layer (0, 0, 0, 1) exactly, so it is composited as a row of a tile without
         sprites is: the reduced layer alone, or, with neither and no body drawn in the tile, the
         packed background (33 % of those tiles' rows in sparks at 1280×720, 61 % in explosion)."""
-        ti.loop_config(block_dim=1)
-        for t in range(TX * TY):
-            tx, ty = t % TX, t // TX
-            px0, py0 = tx * TILE, ty * TILE
-            px1, py1 = ti.min(W - 1, px0 + TILE - 1), ti.min(H - 1, py0 + TILE - 1)
-            n = tile_count[t]
-            stale = ex0 <= tx and tx <= ex1 and ey0 <= ty and ty <= ey1
-            for j in range(ti.max(0, ty - 1), ti.min(TY - 1, ty + 1) + 1):
-                for i in range(ti.max(0, tx - 1), ti.min(TX - 1, tx + 1) + 1):
-                    stale |= dirty[j * TX + i] != 0 or dirty_prev[j * TX + i] != 0
-            if stale:
-                edges[t] = -1
-            near = 0
-            if ti.static(k != 0):
-                near = lo_near(px0, py0, px1, py1, touched_lo, Wl, Hl, TXl, s)
-            if n == 0 and near == 0 and dirty[t] == 0:
-                if copy != 2:
-                    for y in range(py0, py1 + 1):
-                        background_row(bg_packed, out, out64, copy, y, px0, px1, W)
-            else:
-                drawn = 0  # the rows of this tile its own sprites may have drawn in
-                if n > 0:
-                    drawn = full_rows[t]
-                ab, aw = tile_rows(px0, py0, px1, py1, W)
-                edge, jt, empty = 0, 0, 0
-                if ti.static(k != 0):
-                    if near != 0:
-                        edge = edges[t]
-                        if edge < 0:
-                            edge = tile_edge_rows(px0, py0, px1, py1, dep, W * H, W, Wl, Hl, s, edge_rows,
-                                                  t * TILE)
-                            edges[t] = edge
-                    jt = ti.max(lo_row(py0, k), 0)  # the tile's first reduced row
-                    # bit j - jt: reduced row j is the empty layer under the tile
-                    if near != 0 and dirty[t] == 0 and drawn != (1 << (py1 - py0 + 1)) - 1:
-                        empty = empty_rows(accA, jt, ti.min(lo_row(py1, k) + 1, Hl - 1), px0, px1, W * H, Wl, k)
-                for y in range(py0, py1 + 1):
-                    full_here = (drawn >> (y - py0)) & 1
-                    fy, ra, rb, mask = 0.0, 0, 0, 0
-                    done = 0  # the row drawn under the reduced layer alone
+        # the tiles spread over the CPU's tasks (engine.spread): in order, a fire's tiles, which
+        # lie together, were one or two tasks of 512
+        for sl in range(NT * TASK):
+            for r in range(rounds(TX * TY, NT)):
+                t = item(sl, r, NT)
+                if t < TX * TY:
+                    tx, ty = t % TX, t // TX
+                    px0, py0 = tx * TILE, ty * TILE
+                    px1, py1 = ti.min(W - 1, px0 + TILE - 1), ti.min(H - 1, py0 + TILE - 1)
+                    n = tile_count[t]
+                    stale = ex0 <= tx and tx <= ex1 and ey0 <= ty and ty <= ey1
+                    for j in range(ti.max(0, ty - 1), ti.min(TY - 1, ty + 1) + 1):
+                        for i in range(ti.max(0, tx - 1), ti.min(TX - 1, tx + 1) + 1):
+                            stale |= dirty[j * TX + i] != 0 or dirty_prev[j * TX + i] != 0
+                    if stale:
+                        edges[t] = -1
+                    near = 0
                     if ti.static(k != 0):
-                        # the upsample's row terms, hoisted by hand (two loads and a lerp per pixel
-                        # where it is bilinear: every pixel whose bit in the row's mask is clear)
-                        v = (y + 0.5) * s - 0.5
-                        j0 = ti.cast(ti.floor(v), ti.i32)
-                        fy = v - j0
-                        ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
-                        ra, rb = W * H + ja * Wl, W * H + jb * Wl  # (the reduced rows' first texels)
-                        if edge != 0:
-                            mask = edge_rows[t * TILE + y - py0]
-                        if full_here == 0 and near != 0:
-                            done = 1
-                            if dirty[t] == 0 and (empty >> (ja - jt)) & (empty >> (jb - jt)) & 1 != 0:
-                                # both its rows the empty layer here (``empty``: upsample.empty_rows),
-                                # and no body drew in the tile (``bgc`` is then the frame's, bodies
-                                # drawn in, not what was packed): the packed background, bit for bit
-                                # — also where the upsample is bilateral (``mask``): its four texels
-                                # are then the empty layer, whose weighted mean is itself (RGB 0·w =
-                                # 0; T: Σ w·1 / Σ w, one sum over the other). The horizon's band of
-                                # bilateral rows, where the receding floor's depth grows by more
-                                # than 10 % a texel, is mostly such rows (flames.toml at 1280×720:
-                                # three rows of tiles, 56k pixels)
+                        near = lo_near(px0, py0, px1, py1, touched_lo, Wl, Hl, TXl, s)
+                    if n == 0 and near == 0 and dirty[t] == 0:
+                        if copy != 2:
+                            for y in range(py0, py1 + 1):
                                 background_row(bg_packed, out, out64, copy, y, px0, px1, W)
-                            elif (mask == 0 or mask == (1 << TILE) - 1) and px1 - px0 == TILE - 1 and mode == 0:
-                                # the common case under smoke: bilinear (or, with a full mask,
-                                # bilateral at every pixel: the horizon's band), a whole row of the
-                                # tile, opaque RGBA (the usual mode) with the mode a constant: its
-                                # tests and swaps folded away (a branch per pixel cost the unrolled
-                                # row ~1 ms a frame at 1280×720; a second unrolled copy for the
-                                # other modes, ~0.15 s of every start: they take the loops)
-                                reduced_row(accA, dep, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, Wl, k,
-                                            mask)
-                            elif mask == 0:
-                                for x in range(px0, px1 + 1):
-                                    low = (1.0 - fy) * row_lerp(accA, ra, x, Wl, k) + fy * row_lerp(accA, rb, x, Wl, k)
-                                    out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure, mode)
-                            else:
-                                done = 0  # (some pixels bilateral: the general loop below)
-                    if done == 0:
-                        if full_here == 0 and near == 0 and dirty[t] == 0:
-                            background_row(bg_packed, out, out64, copy, y, px0, px1, W)
-                        else:
-                            for x in range(px0, px1 + 1):
-                                q = y * W + x
-                                full = EMPTY_LAYER
-                                if full_here != 0:
-                                    full = acc_layer(accA, accB, ab + y * aw + x, shading)
-                                low = EMPTY_LAYER
-                                if ti.static(k != 0):
-                                    if near != 0:
-                                        if (mask >> (x - px0)) & 1 != 0:
-                                            low = lo_bilateral(x, y, dep[q], accA, dep, W * H, Wl, Hl, s)
-                                        else:
-                                            low = (1.0 - fy) * row_lerp(accA, ra, x, Wl, k) + fy * row_lerp(accA, rb, x, Wl, k)
-                                out[q] = finish(bgc[q], low, full, exposure, mode)
+                    else:
+                        drawn = 0  # the rows of this tile its own sprites may have drawn in
+                        if n > 0:
+                            drawn = full_rows[t]
+                        ab, aw = tile_rows(px0, py0, px1, py1, W)
+                        edge, jt, empty = 0, 0, 0
+                        if ti.static(k != 0):
+                            if near != 0:
+                                edge = edges[t]
+                                if edge < 0:
+                                    edge = tile_edge_rows(px0, py0, px1, py1, dep, W * H, W, Wl, Hl, s, edge_rows,
+                                                          t * TILE)
+                                    edges[t] = edge
+                            jt = ti.max(lo_row(py0, k), 0)  # the tile's first reduced row
+                            # bit j - jt: reduced row j is the empty layer under the tile
+                            if near != 0 and dirty[t] == 0 and drawn != (1 << (py1 - py0 + 1)) - 1:
+                                empty = empty_rows(accA, jt, ti.min(lo_row(py1, k) + 1, Hl - 1), px0, px1, W * H, Wl, k)
+                        for y in range(py0, py1 + 1):
+                            full_here = (drawn >> (y - py0)) & 1
+                            fy, ra, rb, mask = 0.0, 0, 0, 0
+                            done = 0  # the row drawn under the reduced layer alone
+                            if ti.static(k != 0):
+                                # the upsample's row terms, hoisted by hand (two loads and a lerp per pixel
+                                # where it is bilinear: every pixel whose bit in the row's mask is clear)
+                                v = (y + 0.5) * s - 0.5
+                                j0 = ti.cast(ti.floor(v), ti.i32)
+                                fy = v - j0
+                                ja, jb = ti.min(ti.max(j0, 0), Hl - 1), ti.min(ti.max(j0 + 1, 0), Hl - 1)
+                                ra, rb = W * H + ja * Wl, W * H + jb * Wl  # (the reduced rows' first texels)
+                                if edge != 0:
+                                    mask = edge_rows[t * TILE + y - py0]
+                                if full_here == 0 and near != 0:
+                                    done = 1
+                                    if dirty[t] == 0 and (empty >> (ja - jt)) & (empty >> (jb - jt)) & 1 != 0:
+                                        # both its rows the empty layer here (``empty``: upsample.empty_rows),
+                                        # and no body drew in the tile (``bgc`` is then the frame's, bodies
+                                        # drawn in, not what was packed): the packed background, bit for bit
+                                        # — also where the upsample is bilateral (``mask``): its four texels
+                                        # are then the empty layer, whose weighted mean is itself (RGB 0·w =
+                                        # 0; T: Σ w·1 / Σ w, one sum over the other). The horizon's band of
+                                        # bilateral rows, where the receding floor's depth grows by more
+                                        # than 10 % a texel, is mostly such rows (flames.toml at 1280×720:
+                                        # three rows of tiles, 56k pixels)
+                                        background_row(bg_packed, out, out64, copy, y, px0, px1, W)
+                                    elif (mask == 0 or mask == (1 << TILE) - 1) and px1 - px0 == TILE - 1 and mode == 0:
+                                        # the common case under smoke: bilinear (or, with a full mask,
+                                        # bilateral at every pixel: the horizon's band), a whole row of the
+                                        # tile, opaque RGBA (the usual mode) with the mode a constant: its
+                                        # tests and swaps folded away (a branch per pixel cost the unrolled
+                                        # row ~1 ms a frame at 1280×720; a second unrolled copy for the
+                                        # other modes, ~0.15 s of every start: they take the loops)
+                                        reduced_row(accA, dep, bgc, out, ra, rb, y * W + px0, px0, fy, exposure, Wl, k,
+                                                    mask)
+                                    elif mask == 0:
+                                        for x in range(px0, px1 + 1):
+                                            low = rows_lerp(accA, ra, rb, x, fy, Wl, k)
+                                            out[y * W + x] = finish(bgc[y * W + x], low, EMPTY_LAYER, exposure, mode)
+                                    else:
+                                        done = 0  # (some pixels bilateral: the general loop below)
+                            if done == 0:
+                                if full_here == 0 and near == 0 and dirty[t] == 0:
+                                    background_row(bg_packed, out, out64, copy, y, px0, px1, W)
+                                else:
+                                    for x in range(px0, px1 + 1):
+                                        q = y * W + x
+                                        full = EMPTY_LAYER
+                                        if full_here != 0:
+                                            full = acc_layer(accA, accB, ab + y * aw + x, shading)
+                                        low = EMPTY_LAYER
+                                        if ti.static(k != 0):
+                                            if near != 0:
+                                                if (mask >> (x - px0)) & 1 != 0:
+                                                    low = lo_bilateral(x, y, dep[q], accA, dep, W * H, Wl, Hl, s)
+                                                else:
+                                                    low = rows_lerp(accA, ra, rb, x, fy, Wl, k)
+                                        out[q] = finish(bgc[q], low, full, exposure, mode)
 
     @ti.kernel
     def composite_pixels(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,

@@ -13,6 +13,7 @@ added (``with_coarse``).
 
 import taichi as ti
 
+from ..spread import TASK, item, rounds, tasks
 from .binning import vec16
 from .splat import add_sprite, capsule_point, disc_weight, record_box
 from .sprites import TILE
@@ -38,6 +39,7 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
     funcs ``tile_rows`` (where the full level keeps a tile's sums) and ``splat_pixel`` (one pixel's
     sums in registers) serve the composite too; the three kernels splat the levels, per tile
     (``splat_tiles``) or per texel (the coarse level, then the reduced)."""
+    NT = tasks()  # (the per-tile loop's tasks: engine.spread)
 
     @ti.func
     def deposit(px0, py0, px1, py1, rec, accA: ti.template(), accB: ti.template(),
@@ -227,55 +229,59 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
         T0), for a frame with no sprite at the other two while every tile of theirs is already
         clear (``Renderer._splat``): their code is not compiled in, so a scene that never draws
         them (sparks, galaxy) does not build it, at any start."""
-        ti.loop_config(block_dim=1)
         LO, LC = W * H, W * H + Wl * Hl
-        for t in range(t_lo, t_hi):
-            lvl, tt, tx_n, Wk, Hk, base = 0, t, TX, W, H, 0
-            if ti.static(levels):
-                if t >= T0 + T1:
-                    lvl, tt, tx_n, Wk, Hk, base = 2, t - T0 - T1, TXc, Wc, Hc, LC
-                elif t >= T0:
-                    lvl, tt, tx_n, Wk, Hk, base = 1, t - T0, TXl, Wl, Hl, LO
-            n = tile_count[t]
-            px0, py0 = (tt % tx_n) * TILE, (tt // tx_n) * TILE
-            px1, py1 = ti.min(Wk - 1, px0 + TILE - 1), ti.min(Hk - 1, py0 + TILE - 1)
-            if n > 0:
-                ab, aw = base, Wk  # the reduced and coarse levels' accumulators: row-major
-                if lvl == 0:
-                    ab, aw = tile_rows(px0, py0, px1, py1, W)
-                rows = splat_tile(t, px0, py0, px1, py1, pairs, tile_count, tile_start, accA, accB, dep,
-                                  base, Wk, ab, aw)
-                if lvl == 0:
-                    full_rows[t] = rows
-            if ti.static(levels):
-                if lvl == 2:
-                    if n == 0 and touched_co[tt] != 0:
-                        for y in range(py0, py1 + 1):
-                            for k in range(base + y * Wk + px0, base + y * Wk + px1 + 1):
-                                accA[k] = EMPTY_LAYER
-                                if ti.static(uses_alpha):
-                                    accB[k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
-                    touched_co[tt] = ti.select(n > 0, 1, 0)
-                elif lvl == 1:
-                    near = lo_near(px0, py0, px1, py1, touched_co, Wc, Hc, TXc, 0.5)
-                    if near != 0:
-                        near = co_drawn(px0, py0, px1, py1, accA, accB, LC, Wc, Hc)
-                    if n > 0 or near != 0 or touched_lo[tt] != 0:
-                        for y in range(py0, py1 + 1):
-                            for x in range(px0, px1 + 1):
-                                k = base + y * Wk + x
-                                v = EMPTY_LAYER
-                                if n > 0 or near != 0:
-                                    A, B = EMPTY_LAYER, ti.Vector([0.0, 0.0, 0.0, 0.0])
-                                    if n > 0:
-                                        A = accA[k]
+        # the tiles spread over the CPU's tasks (engine.spread): in order, the coarse level's
+        # few dozen were one task and the reduced level's one or two, each a thread's alone
+        for s in range(NT * TASK):
+            for r in range(rounds(t_hi - t_lo, NT)):
+                t = t_lo + item(s, r, NT)
+                if t < t_hi:
+                    lvl, tt, tx_n, Wk, Hk, base = 0, t, TX, W, H, 0
+                    if ti.static(levels):
+                        if t >= T0 + T1:
+                            lvl, tt, tx_n, Wk, Hk, base = 2, t - T0 - T1, TXc, Wc, Hc, LC
+                        elif t >= T0:
+                            lvl, tt, tx_n, Wk, Hk, base = 1, t - T0, TXl, Wl, Hl, LO
+                    n = tile_count[t]
+                    px0, py0 = (tt % tx_n) * TILE, (tt // tx_n) * TILE
+                    px1, py1 = ti.min(Wk - 1, px0 + TILE - 1), ti.min(Hk - 1, py0 + TILE - 1)
+                    if n > 0:
+                        ab, aw = base, Wk  # the reduced and coarse levels' accumulators: row-major
+                        if lvl == 0:
+                            ab, aw = tile_rows(px0, py0, px1, py1, W)
+                        rows = splat_tile(t, px0, py0, px1, py1, pairs, tile_count, tile_start, accA, accB, dep,
+                                          base, Wk, ab, aw)
+                        if lvl == 0:
+                            full_rows[t] = rows
+                    if ti.static(levels):
+                        if lvl == 2:
+                            if n == 0 and touched_co[tt] != 0:
+                                for y in range(py0, py1 + 1):
+                                    for k in range(base + y * Wk + px0, base + y * Wk + px1 + 1):
+                                        accA[k] = EMPTY_LAYER
                                         if ti.static(uses_alpha):
-                                            B = accB[k]
-                                    if near != 0:
-                                        A, B = with_coarse(A, B, x, y, dep[k], accA, accB, dep, LC, Wc, Hc)
-                                    v = layer(A, B, shading)
-                                accA[k] = v
-                    touched_lo[tt] = ti.select(n > 0 or near != 0, 1, 0)
+                                            accB[k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+                            touched_co[tt] = ti.select(n > 0, 1, 0)
+                        elif lvl == 1:
+                            near = lo_near(px0, py0, px1, py1, touched_co, Wc, Hc, TXc, 0.5)
+                            if near != 0:
+                                near = co_drawn(px0, py0, px1, py1, accA, accB, LC, Wc, Hc)
+                            if n > 0 or near != 0 or touched_lo[tt] != 0:
+                                for y in range(py0, py1 + 1):
+                                    for x in range(px0, px1 + 1):
+                                        k = base + y * Wk + x
+                                        v = EMPTY_LAYER
+                                        if n > 0 or near != 0:
+                                            A, B = EMPTY_LAYER, ti.Vector([0.0, 0.0, 0.0, 0.0])
+                                            if n > 0:
+                                                A = accA[k]
+                                                if ti.static(uses_alpha):
+                                                    B = accB[k]
+                                            if near != 0:
+                                                A, B = with_coarse(A, B, x, y, dep[k], accA, accB, dep, LC, Wc, Hc)
+                                            v = layer(A, B, shading)
+                                        accA[k] = v
+                            touched_lo[tt] = ti.select(n > 0 or near != 0, 1, 0)
 
     @ti.kernel
     def splat_pixels_co(pairs: ND_PAIRS, tile_count: ND_I1, tile_start: ND_I1, accA: ND_V4,

@@ -133,6 +133,13 @@ def row_lerp(lo: ti.template(), r, x, Wl, k: ti.template()):
 
 
 @ti.func
+def rows_lerp(lo: ti.template(), ra, rb, x, fy, Wl, k: ti.template()):
+    """Reduced rows ra, rb (``row_lerp`` each) at column x, then between them at fraction fy:
+    the bilinear upsample at a pixel of column x."""
+    return (1.0 - fy) * row_lerp(lo, ra, x, Wl, k) + fy * row_lerp(lo, rb, x, Wl, k)
+
+
+@ti.func
 def empty_rows(lo: ti.template(), j0, j1, px0, px1, LO, Wl, k: ti.template()):
     """A mask, bit j − j0 for reduced rows j0..j1: whether every texel that ``row_lerp`` reads
     for the columns px0..px1 in row j is the empty layer (0, 0, 0, 1) exactly. Then so is each
