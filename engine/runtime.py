@@ -17,14 +17,14 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")  # keep stdout for 
 
 import taichi as ti  # noqa: E402
 
-from . import front_end  # noqa: E402  (installed at import: see engine.front_end)
+from . import affinity, front_end  # noqa: E402  (front_end installed at import: see engine.front_end)
 
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
 # "gpu" takes the first of these that starts; "auto" the same, else the CPU. (Taichi's own ti.gpu
 # list also probes OpenGL, which crashed the process on a headless machine without a GPU.)
 _GPU_ORDER = ("cuda", "vulkan", "metal")
 
-_state = {"arch": None, "requested": None, "kwargs": None, "thread": None}
+_state = {"arch": None, "requested": None, "kwargs": None, "thread": None, "pinned": {}}
 _reset_hooks = [front_end.KEPT_TEXTS.forget_folder]  # caches of the current Taichi program (fields,
 # kernels; the kept texts' cache folder, which the next program may keep elsewhere)
 
@@ -72,6 +72,11 @@ def _arch_in_use() -> str:
     return "cpu" if arch in (ti.x64, ti.arm64) else arch.name
 
 
+def pinned() -> dict:
+    """{thread id: CPU} of the CPU pool's workers this program pinned (engine.affinity)."""
+    return dict(_state["pinned"])
+
+
 def one_thread(count: int, limit: int) -> bool:
     """Whether a loop over ``count`` items (at most ``limit``) runs on the launching thread: a
     compile-time choice a kernel takes as a template flag, true on the CPU backend only. There each
@@ -97,6 +102,8 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
     "error". The offline cache stays on so a second run of the same scene starts fast; it
     lives where ``PARTICLES_TI_CACHE`` points (a folder) if set, else in Taichi's default place.
     ``kernel_profiler`` turns on Taichi's per-kernel timer (``particles profile`` uses it).
+    On the CPU, Taichi's worker threads are then held one to a core (engine.affinity;
+    ``PARTICLES_PIN_THREADS=0``: not): :func:`pinned` says which.
     """
     if arch not in ARCHES:
         raise ValueError(f"arch: unknown value {arch!r}; allowed: {', '.join(ARCHES)}")
@@ -125,6 +132,7 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
         kwargs["offline_cache_file_path"] = os.environ["PARTICLES_TI_CACHE"]
     if threads and arch in ("cpu", "auto"):
         kwargs["cpu_max_num_threads"] = int(threads)
+    threads_before = affinity.threads_now()
     with contextlib.redirect_stdout(io.StringIO()):  # "[Taichi] Starting on arch=..." banner
         if arch == "cpu":
             ti.init(arch=ti.cpu, **kwargs)
@@ -142,6 +150,8 @@ def init(arch: str = "cpu", *, threads: int | None = None, debug: bool = False,
     _state["arch"], _state["requested"] = _arch_in_use(), arch
     _own_thread()
     front_end.install()
+    # Taichi's CPU workers one to a core (engine.affinity: they took turns on one)
+    _state["pinned"] = affinity.pin_workers(threads_before) if _state["arch"] == "cpu" else {}
     if not _state.get("exit_hook"):
         atexit.register(_write_cache_at_exit)
         _state["exit_hook"] = True
@@ -217,6 +227,7 @@ def reset() -> None:
     if _state["arch"] not in (None, "host"):
         ti.reset()
     _state["arch"] = _state["requested"] = _state["thread"] = None
+    _state["pinned"] = {}
 
 
 class Interrupted(Exception):
