@@ -12,6 +12,7 @@ keeps it, its reduced-resolution depth and its tone-mapped packed copy.
 import taichi as ti
 
 from ..colliders import BOX, CAPSULE, PLANE, SPHERE
+from ..spread import TASK, item, rounds, tasks
 from .sprites import TILE
 from .upsample import ND_F, ND_I1, ND_V4  # pixel arrays: flat, y·W + x
 
@@ -156,52 +157,57 @@ def build_background_kernel(render_cfg, colliders):
     else:
         cpt = cnr = crad = chalf = cax = caz = None
 
+    NT = tasks()
+
     @ti.kernel
     def background(out: ND_V4, depth: ND_F, o: vec3, f: vec3, r: vec3, u: vec3, th: ti.f32,
                    W: ti.i32, H: ti.i32, show: ti.i32, x0: ti.i32, y0: ti.i32, x1: ti.i32, y1: ti.i32):
-        for py in range(y0, y1):
-            for px in range(x0, x1):
-                d = ray_dir(px, py, f, r, u, th, W, H)
-                col = ti.Vector([bgc[0], bgc[1], bgc[2]]) * (0.6 + 0.8 * (0.5 + 0.5 * d[1]))
-                z = SKY_DEPTH
-                if ti.static(grid):  # the ground grid, unless a plane collider is shown
-                    ground = 1
-                    if ti.static(len(planes) > 0):
-                        ground = ti.select(show == 0, 1, 0)
-                    if ground != 0:
-                        col, z = grid_shade(o, d, ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 1.0, 0.0]),
-                                            th, f, col, z, H)
-                if show != 0:
-                    for k in ti.static(planes):
-                        col, z = grid_shade(o, d, cpt[k], cnr[k], th, f, col, z, H)
-                    for k in ti.static(spheres):
-                        oc = o - cpt[k]
-                        b = oc.dot(d)
-                        c = oc.dot(oc) - crad[k] * crad[k]
-                        disc = b * b - c
-                        if disc > 0:
-                            s = -b - ti.sqrt(disc)
-                            zz = s * d.dot(f)
-                            if s > 0 and zz < z:
-                                n = (o + s * d - cpt[k]).normalized()
-                                ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
-                                lam = ti.max(0.0, n.dot(ldir))
-                                rim = 1.0 - ti.abs(n.dot(d))
-                                col = ti.Vector([0.02, 0.021, 0.025]) \
-                                    + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) + 0.03 * rim * rim * rim
-                                z = zz
-                    for k in ti.static(boxes):
-                        s, n = ray_box(o, d, cpt[k], cax[k], cnr[k], caz[k], chalf[k])
-                        zz = s * d.dot(f)
-                        if s > 0 and zz < z:
-                            col, z = solid_shade(n, d), zz
-                    for k in ti.static(capsules):
-                        s, n = ray_capsule(o, d, cpt[k], cnr[k], chalf[k][1], crad[k])
-                        zz = s * d.dot(f)
-                        if s > 0 and zz < z:
-                            col, z = solid_shade(n, d), zz
-                out[py * W + px] = ti.Vector([col[0], col[1], col[2], 0.0])
-                depth[py * W + px] = z
+        for sl in range(NT * TASK):  # the rows spread over the CPU's tasks (engine.spread): a
+            for rr in range(rounds(y1 - y0, NT)):  # moved collider's few hundred were one task
+                py = y0 + item(sl, rr, NT)
+                if py < y1:
+                    for px in range(x0, x1):
+                        d = ray_dir(px, py, f, r, u, th, W, H)
+                        col = ti.Vector([bgc[0], bgc[1], bgc[2]]) * (0.6 + 0.8 * (0.5 + 0.5 * d[1]))
+                        z = SKY_DEPTH
+                        if ti.static(grid):  # the ground grid, unless a plane collider is shown
+                            ground = 1
+                            if ti.static(len(planes) > 0):
+                                ground = ti.select(show == 0, 1, 0)
+                            if ground != 0:
+                                col, z = grid_shade(o, d, ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 1.0, 0.0]),
+                                                    th, f, col, z, H)
+                        if show != 0:
+                            for k in ti.static(planes):
+                                col, z = grid_shade(o, d, cpt[k], cnr[k], th, f, col, z, H)
+                            for k in ti.static(spheres):
+                                oc = o - cpt[k]
+                                b = oc.dot(d)
+                                c = oc.dot(oc) - crad[k] * crad[k]
+                                disc = b * b - c
+                                if disc > 0:
+                                    s = -b - ti.sqrt(disc)
+                                    zz = s * d.dot(f)
+                                    if s > 0 and zz < z:
+                                        n = (o + s * d - cpt[k]).normalized()
+                                        ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
+                                        lam = ti.max(0.0, n.dot(ldir))
+                                        rim = 1.0 - ti.abs(n.dot(d))
+                                        col = ti.Vector([0.02, 0.021, 0.025]) \
+                                            + 0.06 * lam * ti.Vector([0.8, 0.85, 1.0]) + 0.03 * rim * rim * rim
+                                        z = zz
+                            for k in ti.static(boxes):
+                                s, n = ray_box(o, d, cpt[k], cax[k], cnr[k], caz[k], chalf[k])
+                                zz = s * d.dot(f)
+                                if s > 0 and zz < z:
+                                    col, z = solid_shade(n, d), zz
+                            for k in ti.static(capsules):
+                                s, n = ray_capsule(o, d, cpt[k], cnr[k], chalf[k][1], crad[k])
+                                zz = s * d.dot(f)
+                                if s > 0 and zz < z:
+                                    col, z = solid_shade(n, d), zz
+                        out[py * W + px] = ti.Vector([col[0], col[1], col[2], 0.0])
+                        depth[py * W + px] = z
 
     return background
 
@@ -216,15 +222,18 @@ def downsample_depth(depth: ND_F, W: ti.i32, H: ti.i32, at: ti.i32, Wk: ti.i32, 
     edge inside its texel), for the texels [x0, x1) × [y0, y1) — and with ``tiles`` only those
     whose block lies in a 16×16 tile marked in ``dirty`` or ``dirty_prev`` (where soft bodies drew
     this frame or the last; k divides 16, so a block never straddles two tiles)."""
-    for y in range(y0, y1):
-        for x in range(x0, x1):
-            t = ((y * k) // TILE) * TX + (x * k) // TILE
-            if tiles == 0 or dirty[t] != 0 or dirty_prev[t] != 0:
-                z = 0.0
-                for dy in range(k):
-                    for dx in range(k):
-                        z = ti.max(z, depth[ti.min(y * k + dy, H - 1) * W + ti.min(x * k + dx, W - 1)])
-                depth[at + y * Wk + x] = z
+    for sl in range(ti.static(tasks() * TASK)):  # (the rows spread over the CPU's tasks: engine.spread)
+        for rr in range(rounds(y1 - y0, ti.static(tasks()))):
+            y = y0 + item(sl, rr, ti.static(tasks()))
+            if y < y1:
+                for x in range(x0, x1):
+                    t = ((y * k) // TILE) * TX + (x * k) // TILE
+                    if tiles == 0 or dirty[t] != 0 or dirty_prev[t] != 0:
+                        z = 0.0
+                        for dy in range(k):
+                            for dx in range(k):
+                                z = ti.max(z, depth[ti.min(y * k + dy, H - 1) * W + ti.min(x * k + dx, W - 1)])
+                        depth[at + y * Wk + x] = z
 
 
 @ti.kernel

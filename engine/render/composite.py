@@ -422,13 +422,16 @@ def _build(uses_add: bool, uses_alpha: bool):
         """The background alone, tone-mapped and packed: what an untouched tile copies (in the
         pixel rectangle [x0, x1) × [y0, y1), two pixels to a u64: a pair the rectangle's edge cuts
         is packed whole, its other pixel again from its unchanged ``bgc``)."""
-        for y in range(y0, y1):
-            for i in range((y * W + x0) >> 1, ((y * W + x1 - 1) >> 1) + 1):
-                lo = ti.cast(finish(bgc[2 * i], EMPTY_LAYER, EMPTY_LAYER, exposure, mode), ti.u64)
-                hi = ti.u64(0)
-                if 2 * i + 1 < W * H:
-                    hi = ti.cast(finish(bgc[2 * i + 1], EMPTY_LAYER, EMPTY_LAYER, exposure, mode), ti.u64)
-                bg_packed[i] = lo | (hi << 32)
+        for sl in range(NT * TASK):  # (the rows spread over the CPU's tasks: engine.spread)
+            for rr in range(rounds(y1 - y0, NT)):
+                y = y0 + item(sl, rr, NT)
+                if y < y1:
+                    for i in range((y * W + x0) >> 1, ((y * W + x1 - 1) >> 1) + 1):
+                        lo = ti.cast(finish(bgc[2 * i], EMPTY_LAYER, EMPTY_LAYER, exposure, mode), ti.u64)
+                        hi = ti.u64(0)
+                        if 2 * i + 1 < W * H:
+                            hi = ti.cast(finish(bgc[2 * i + 1], EMPTY_LAYER, EMPTY_LAYER, exposure, mode), ti.u64)
+                        bg_packed[i] = lo | (hi << 32)
 
     # (launched without Taichi's per-argument Python: engine.launch)
     return {name: fast(k) for name, k in dict(

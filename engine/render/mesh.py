@@ -23,6 +23,7 @@ import taichi as ti
 
 from .. import runtime
 from ..launch import fast
+from ..spread import TASK, item, rounds, tasks
 from .sprites import TILE
 from .upsample import ND_F, ND_I1, ND_V4  # pixel arrays: flat, y·W + x
 
@@ -137,6 +138,7 @@ def _build(m: MeshLayer):
     adj_tri = getattr(m, "adj_tri", None)
     adj_start = getattr(m, "adj_start", None)
     fields = m.fields
+    NT = tasks()  # (the loops' tasks: engine.spread)
 
     @ti.func
     def project(p, o, f, r, u, th, W, H):
@@ -167,42 +169,48 @@ def _build(m: MeshLayer):
         """Empty the visibility and line buffers where the last frame wrote them (the tiles it
         marked dirty: nothing writes them elsewhere), or everywhere (``whole``: new buffers);
         those tiles become ``dirty_prev``, rewritten (restored) this frame too."""
-        for t in range(T):
-            if whole != 0 or dirty[t] != 0:
-                px0, py0 = (t % TX) * TILE, (t // TX) * TILE
-                for py in range(py0, ti.min(H, py0 + TILE)):
-                    for k in range(py * W + px0, py * W + ti.min(W, px0 + TILE)):
-                        # (each buffer only where something reads it: a scene of lines alone
-                        # never reads the visibility buffer, one of triangles alone the sums)
-                        if ti.static(tri_count > 0):
-                            vis[k] = ti.i64(EMPTY)
-                        if ti.static(line_count > 0):
-                            lines[k] = ti.Vector([0, 0], dt=ti.i64)
-            dirty_prev[t] = dirty[t]
-            dirty[t] = 0
+        for sl in range(NT * TASK):  # (spread over the CPU's tasks: engine.spread)
+            for rr in range(rounds(T, NT)):
+                t = item(sl, rr, NT)
+                if t < T:
+                    if whole != 0 or dirty[t] != 0:
+                        px0, py0 = (t % TX) * TILE, (t // TX) * TILE
+                        for py in range(py0, ti.min(H, py0 + TILE)):
+                            for k in range(py * W + px0, py * W + ti.min(W, px0 + TILE)):
+                                # (each buffer only where something reads it: a scene of lines alone
+                                # never reads the visibility buffer, one of triangles alone the sums)
+                                if ti.static(tri_count > 0):
+                                    vis[k] = ti.i64(EMPTY)
+                                if ti.static(line_count > 0):
+                                    lines[k] = ti.Vector([0, 0], dt=ti.i64)
+                    dirty_prev[t] = dirty[t]
+                    dirty[t] = 0
 
     @ti.func
     def tris(vis: ti.template(), dirty: ti.template(), o, f, r, u, th, W, H, TX):
-        for t in range(tri_count):
-            i = tri_idx[t]
-            a = project(P[i[0]], o, f, r, u, th, W, H)
-            b = project(P[i[1]], o, f, r, u, th, W, H)
-            c = project(P[i[2]], o, f, r, u, th, W, H)
-            area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-            tri_scr[t, 0], tri_scr[t, 1], tri_scr[t, 2] = a, b, c
-            if a[2] > NEAR and b[2] > NEAR and c[2] > NEAR and ti.abs(area) > 1e-9:
-                x0 = ti.max(0, ti.cast(ti.floor(ti.min(a[0], b[0], c[0])), ti.i32))
-                x1 = ti.min(W - 1, ti.cast(ti.floor(ti.max(a[0], b[0], c[0])), ti.i32))
-                y0 = ti.max(0, ti.cast(ti.floor(ti.min(a[1], b[1], c[1])), ti.i32))
-                y1 = ti.min(H - 1, ti.cast(ti.floor(ti.max(a[1], b[1], c[1])), ti.i32))
-                for py in range(y0, y1 + 1):
-                    for px in range(x0, x1 + 1):
-                        w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
-                        if w0 >= 0 and w1 >= 0 and w2 >= 0:
-                            z = 1.0 / (w0 / a[2] + w1 / b[2] + w2 / c[2])  # 1/z is linear on screen
-                            key = (ti.cast(ti.bit_cast(z - DEPTH_BIAS, ti.i32), ti.i64) << 32) | ti.cast(t, ti.i64)
-                            ti.atomic_min(vis[py * W + px], key)
-                            dirty[(py // TILE) * TX + px // TILE] = 1  # same value from any thread
+        for sl in range(NT * TASK):  # (spread: a triangle's pixels vary, and a few hundred were one task)
+            for rr in range(rounds(tri_count, NT)):
+                t = item(sl, rr, NT)
+                if t < tri_count:
+                    i = tri_idx[t]
+                    a = project(P[i[0]], o, f, r, u, th, W, H)
+                    b = project(P[i[1]], o, f, r, u, th, W, H)
+                    c = project(P[i[2]], o, f, r, u, th, W, H)
+                    area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+                    tri_scr[t, 0], tri_scr[t, 1], tri_scr[t, 2] = a, b, c
+                    if a[2] > NEAR and b[2] > NEAR and c[2] > NEAR and ti.abs(area) > 1e-9:
+                        x0 = ti.max(0, ti.cast(ti.floor(ti.min(a[0], b[0], c[0])), ti.i32))
+                        x1 = ti.min(W - 1, ti.cast(ti.floor(ti.max(a[0], b[0], c[0])), ti.i32))
+                        y0 = ti.max(0, ti.cast(ti.floor(ti.min(a[1], b[1], c[1])), ti.i32))
+                        y1 = ti.min(H - 1, ti.cast(ti.floor(ti.max(a[1], b[1], c[1])), ti.i32))
+                        for py in range(y0, y1 + 1):
+                            for px in range(x0, x1 + 1):
+                                w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
+                                if w0 >= 0 and w1 >= 0 and w2 >= 0:
+                                    z = 1.0 / (w0 / a[2] + w1 / b[2] + w2 / c[2])  # 1/z is linear on screen
+                                    key = (ti.cast(ti.bit_cast(z - DEPTH_BIAS, ti.i32), ti.i64) << 32) | ti.cast(t, ti.i64)
+                                    ti.atomic_min(vis[py * W + px], key)
+                                    dirty[(py // TILE) * TX + px // TILE] = 1  # same value from any thread
         # (positive floats order like their bit patterns, so the integer minimum is the nearest)
 
     @ti.func
@@ -232,79 +240,85 @@ def _build(m: MeshLayer):
     @ti.func
     def lines_k(acc: ti.template(), vis: ti.template(), depth: ti.template(), dirty: ti.template(), o, f,
                 r, u, th, W, H, TX):
-        for k in range(line_count):
-            ia, ib = line_idx[k][0], line_idx[k][1]
-            a = project(P[ia], o, f, r, u, th, W, H)
-            b = project(P[ib], o, f, r, u, th, W, H)
-            if a[2] > NEAR and b[2] > NEAR:
-                length = ti.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2)
-                n = ti.min(4096, ti.cast(length * 2.0, ti.i32) + 1)
-                col = 0.5 * (C[ia] + C[ib]) * 0.35
-                for s in range(n + 1):
-                    q = a + (b - a) * (s / n)
-                    fx, fy = q[0] - 0.5, q[1] - 0.5  # bilinear coverage of a 1-px line
-                    ix, iy = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
-                    tx, ty = fx - ix, fy - iy
-                    for dy in ti.static(range(2)):
-                        for dx in ti.static(range(2)):
-                            X, Y = ix + dx, iy + dy
-                            if 0 <= X < W and 0 <= Y < H:
-                                zt = 1e30
-                                if ti.static(tri_count > 0):
-                                    zt = tri_depth(vis, Y * W + X)
-                                if q[2] < ti.min(depth[Y * W + X], zt) + 0.02:
-                                    w = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
-                                    tau = -ti.log(1.0 - ti.min(0.999, 1.6 * w))
-                                    v = ti.cast(ti.Vector([tau, tau * col[0], tau * col[1],
-                                                           tau * col[2]]) * FIXED, ti.i32)
-                                    # integers: exact in any order
-                                    ti.atomic_add(acc[Y * W + X], ti.Vector([pack2(v[0], v[1]),
-                                                                             pack2(v[2], v[3])]))
-                                    dirty[(Y // TILE) * TX + X // TILE] = 1
+        for sl in range(NT * TASK):  # (spread: a line's samples vary with its length)
+            for rr in range(rounds(line_count, NT)):
+                k = item(sl, rr, NT)
+                if k < line_count:
+                    ia, ib = line_idx[k][0], line_idx[k][1]
+                    a = project(P[ia], o, f, r, u, th, W, H)
+                    b = project(P[ib], o, f, r, u, th, W, H)
+                    if a[2] > NEAR and b[2] > NEAR:
+                        length = ti.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2)
+                        n = ti.min(4096, ti.cast(length * 2.0, ti.i32) + 1)
+                        col = 0.5 * (C[ia] + C[ib]) * 0.35
+                        for s in range(n + 1):
+                            q = a + (b - a) * (s / n)
+                            fx, fy = q[0] - 0.5, q[1] - 0.5  # bilinear coverage of a 1-px line
+                            ix, iy = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
+                            tx, ty = fx - ix, fy - iy
+                            for dy in ti.static(range(2)):
+                                for dx in ti.static(range(2)):
+                                    X, Y = ix + dx, iy + dy
+                                    if 0 <= X < W and 0 <= Y < H:
+                                        zt = 1e30
+                                        if ti.static(tri_count > 0):
+                                            zt = tri_depth(vis, Y * W + X)
+                                        if q[2] < ti.min(depth[Y * W + X], zt) + 0.02:
+                                            w = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
+                                            tau = -ti.log(1.0 - ti.min(0.999, 1.6 * w))
+                                            v = ti.cast(ti.Vector([tau, tau * col[0], tau * col[1],
+                                                                   tau * col[2]]) * FIXED, ti.i32)
+                                            # integers: exact in any order
+                                            ti.atomic_add(acc[Y * W + X], ti.Vector([pack2(v[0], v[1]),
+                                                                                     pack2(v[2], v[3])]))
+                                            dirty[(Y // TILE) * TX + X // TILE] = 1
 
     @ti.func
     def shade(fbg: ti.template(), fdep: ti.template(), bgc: ti.template(), depth: ti.template(),
               vis: ti.template(), acc: ti.template(), dirty: ti.template(), dirty_prev: ti.template(), o, f,
               r, u, th, W, H, TX, TY):
         ldir = ti.Vector([0.4, 0.8, 0.3]).normalized()
-        for t in range(TX * TY):
-            if dirty[t] != 0 or dirty_prev[t] != 0:
-                px0, py0 = (t % TX) * TILE, (t // TX) * TILE
-                for py in range(py0, ti.min(H, py0 + TILE)):
-                    for px in range(px0, ti.min(W, px0 + TILE)):
-                        k = py * W + px
-                        c4 = bgc[k]
-                        z = depth[k]
-                        if ti.static(tri_count > 0):
-                            zt = tri_depth(vis, k)
-                            if zt < z:
-                                key = vis[k]
-                                tt = ti.cast(key - ((key >> 32) << 32), ti.i32)
-                                i = tri_idx[tt]
-                                a, b, c = tri_scr[tt, 0], tri_scr[tt, 1], tri_scr[tt, 2]
-                                w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
-                                w0, w1, w2 = w0 / a[2], w1 / b[2], w2 / c[2]
-                                iz = 1.0 / (w0 + w1 + w2)
-                                n = ((w0 * N[i[0]] + w1 * N[i[1]] + w2 * N[i[2]]) * iz).normalized()
-                                col = (w0 * C[i[0]] + w1 * C[i[1]] + w2 * C[i[2]]) * iz
-                                view = (o - (P[i[0]] * w0 + P[i[1]] * w1 + P[i[2]] * w2) * iz).normalized()
-                                if n.dot(view) < 0:  # two-sided: shade the side we see
-                                    n = -n
-                                diff = ti.max(0.0, n.dot(ldir))
-                                hv = (ldir + view).normalized()
-                                spec = ti.pow(ti.max(0.0, n.dot(hv)), 24.0)
-                                sc = col * (0.18 + 0.7 * diff) * 0.35 + 0.04 * spec
-                                c4 = ti.Vector([sc[0], sc[1], sc[2], 1.0])
-                                z = zt
-                        if ti.static(line_count > 0):
-                            s = unpack4(acc[k])
-                            if s[0] > 0:
-                                T = ti.exp(-s[0] / FIXED)
-                                lc = ti.Vector([s[1], s[2], s[3]]) / ti.cast(s[0], ti.f32)
-                                c3 = ti.Vector([c4[0], c4[1], c4[2]]) * T + lc * (1.0 - T)
-                                c4 = ti.Vector([c3[0], c3[1], c3[2], c4[3] * T + (1.0 - T)])
-                        fbg[k] = c4
-                        fdep[k] = z
+        for sl in range(NT * TASK):  # (spread: the bodies' tiles lie together)
+            for rr in range(rounds(TX * TY, NT)):
+                t = item(sl, rr, NT)
+                if t < TX * TY:
+                    if dirty[t] != 0 or dirty_prev[t] != 0:
+                        px0, py0 = (t % TX) * TILE, (t // TX) * TILE
+                        for py in range(py0, ti.min(H, py0 + TILE)):
+                            for px in range(px0, ti.min(W, px0 + TILE)):
+                                k = py * W + px
+                                c4 = bgc[k]
+                                z = depth[k]
+                                if ti.static(tri_count > 0):
+                                    zt = tri_depth(vis, k)
+                                    if zt < z:
+                                        key = vis[k]
+                                        tt = ti.cast(key - ((key >> 32) << 32), ti.i32)
+                                        i = tri_idx[tt]
+                                        a, b, c = tri_scr[tt, 0], tri_scr[tt, 1], tri_scr[tt, 2]
+                                        w0, w1, w2 = bary(a, b, c, px + 0.5, py + 0.5)
+                                        w0, w1, w2 = w0 / a[2], w1 / b[2], w2 / c[2]
+                                        iz = 1.0 / (w0 + w1 + w2)
+                                        n = ((w0 * N[i[0]] + w1 * N[i[1]] + w2 * N[i[2]]) * iz).normalized()
+                                        col = (w0 * C[i[0]] + w1 * C[i[1]] + w2 * C[i[2]]) * iz
+                                        view = (o - (P[i[0]] * w0 + P[i[1]] * w1 + P[i[2]] * w2) * iz).normalized()
+                                        if n.dot(view) < 0:  # two-sided: shade the side we see
+                                            n = -n
+                                        diff = ti.max(0.0, n.dot(ldir))
+                                        hv = (ldir + view).normalized()
+                                        spec = ti.pow(ti.max(0.0, n.dot(hv)), 24.0)
+                                        sc = col * (0.18 + 0.7 * diff) * 0.35 + 0.04 * spec
+                                        c4 = ti.Vector([sc[0], sc[1], sc[2], 1.0])
+                                        z = zt
+                                if ti.static(line_count > 0):
+                                    s = unpack4(acc[k])
+                                    if s[0] > 0:
+                                        T = ti.exp(-s[0] / FIXED)
+                                        lc = ti.Vector([s[1], s[2], s[3]]) / ti.cast(s[0], ti.f32)
+                                        c3 = ti.Vector([c4[0], c4[1], c4[2]]) * T + lc * (1.0 - T)
+                                        c4 = ti.Vector([c3[0], c3[1], c3[2], c4[3] * T + (1.0 - T)])
+                                fbg[k] = c4
+                                fdep[k] = z
 
     @ti.kernel
     def frame(fbg: ND_V4, fdep: ND_F, bgc: ND_V4, depth: ND_F, vis: ND_I64, acc: ND_L2, dirty: ND_I1,
