@@ -68,8 +68,13 @@ def header() -> str:
         pass
     import taichi as ti
 
+    from engine import runtime
+
+    # (the CPU pool's workers held one to a core, or not: engine.affinity)
+    pinned = len(runtime.pinned())
     return (f"# particles bench  {time.strftime('%Y-%m-%d %H:%M %Z')}  nproc={os.cpu_count()}  "
-            f"cpu={cpu}  python={platform.python_version()}  taichi={'.'.join(map(str, ti.__version__))}")
+            f"cpu={cpu}  python={platform.python_version()}  taichi={'.'.join(map(str, ti.__version__))}  "
+            f"workers pinned={pinned}")
 
 
 def main(quick: bool = False, only=None, quiet: bool = False) -> int:

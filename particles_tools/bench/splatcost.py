@@ -4,8 +4,9 @@ A *covered pair* is a pixel of a tile (any level) and a sprite of that tile's li
 capsule, for a streak) contains the pixel's centre: the work the splat cannot avoid. The reference
 is the cheapest loop that touches the same memory in the same order: per tile (one thread each, as
 the splat), for each covered pair in slot order, a load and a store of that pixel's vec4
-accumulator from a precomputed list of pixel indices (no weights, no branches). Both are timed on
-the renderer's own arrays in one process, alternating, best of N.
+accumulator from a precomputed list of pixel indices (no weights, no branches), its tiles spread
+over the CPU's tasks as the splat's are (engine.spread). Both are timed on the renderer's own
+arrays in one process, alternating, best of N.
 """
 # (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
 
@@ -24,14 +25,20 @@ def _ref_kernel():
 
         vec4 = ti.types.vector(4, ti.f32)
 
+        from engine.spread import TASK, item, rounds, tasks
+
+        NT = tasks()
+
         @ti.kernel
         def ref(idx: ti.types.ndarray(dtype=ti.i32, ndim=1), start: ti.types.ndarray(dtype=ti.i32, ndim=1),
                 acc: ti.types.ndarray(dtype=vec4, ndim=1), T: ti.i32):
-            ti.loop_config(block_dim=1)
-            for t in range(T):
-                for j in range(start[t], start[t + 1]):
-                    k = idx[j]
-                    acc[k] = acc[k] + ti.Vector([1e-3, 1e-3, 1e-3, 0.0])
+            for s in range(NT * TASK):  # (the tiles spread over the CPU's tasks, as the splat's)
+                for r in range(rounds(T, NT)):
+                    t = item(s, r, NT)
+                    if t < T:
+                        for j in range(start[t], start[t + 1]):
+                            k = idx[j]
+                            acc[k] = acc[k] + ti.Vector([1e-3, 1e-3, 1e-3, 0.0])
 
         _REF = ref
     return _REF
