@@ -27,15 +27,20 @@ writes only its own outputs), only the wall time. ``tasks()`` is a few per threa
 import taichi as ti
 
 TASK = 512  # iterations per task of a CPU range-for (Taichi 1.7)
-TASKS_PER_THREAD = 4  # the splat of flames.toml: 2 tasks 1.6 cores of 2, 8 tasks 1.9
+# flames.toml's frame at 1280×720, workers pinned (engine.affinity), two rounds: 1 task a thread
+# 12.9 / 10.9 ms, 2 tasks 10.9 / 9.1, 4 tasks 10.9 / 11.2 (unpinned, its splat alone: 2 tasks
+# 1.2–1.6 cores of 2, 8 tasks 1.9)
+TASKS_PER_THREAD = 2
+MAX_TASKS = 64  # (each task is 512 slots, most of them empty for a short loop: ~1–4 ns each)
 
 
 def tasks() -> int:
-    """How many tasks to spread a loop over: ``TASKS_PER_THREAD`` per thread of the program."""
+    """How many tasks to spread a loop over: ``TASKS_PER_THREAD`` per thread of the program, at
+    most ``MAX_TASKS``."""
     from taichi.lang import impl
 
     threads = int(getattr(impl.current_cfg(), "cpu_max_num_threads", 0) or 1)
-    return TASKS_PER_THREAD * max(1, threads)
+    return min(MAX_TASKS, TASKS_PER_THREAD * max(1, threads))
 
 
 @ti.func
