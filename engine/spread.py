@@ -19,7 +19,8 @@ A loop written as ::
 
 gives task k the items i ≡ k (mod ``tasks``): every task a sample of the whole loop, so the
 threads share its costly parts. Which thread takes an item never changes a result here (each item
-writes only its own outputs), only the wall time. ``tasks()`` is a few per thread of the program
+writes only its own outputs, or folds integers in by atomic adds or minima, alike in any order),
+only the wall time. ``tasks()`` is a few per thread of the program
 (``cpu_max_num_threads``); on a GPU the loop is the same, ``tasks * TASK`` threads.
 """
 # (no `from __future__ import annotations`: Taichi reads a func's annotations at definition)
