@@ -14,8 +14,13 @@ from helpers import on_thread_counts, quick
 from behaviour_scenes import FRAME_SHOTS, adaptive_cloth, adaptive_particles, fixed_cloths, particle_frames
 
 HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "behaviour")
-TOL = dict(rtol=1e-5, atol=1e-5)  # float32 rounding over a few hundred steps; any change of
-# physics, emission order or slot assignment moves particles by far more (or changes `slot`)
+TOL = dict(rtol=1e-5, atol=1e-4)  # float32 rounding over a few hundred steps, on any x86-64 CPU;
+# any change of physics, emission order or slot assignment moves particles by far more (or
+# changes `slot`). Taichi compiles for the CPU it runs on, with fast math: on an AMD EPYC of Zen 5
+# (2026-12-01; the fixtures were recorded on an earlier EPYC and held on an Intel Xeon) one
+# velocity of campfire's 1,026 particles came out 2.7e-5 m/s from its fixture, every other value
+# of the five scenes within 9e-6 (atol 1e-5 failed it). Gravity 0.1 % stronger moves campfire's
+# particles by up to 2.0e-3 m and 6.4e-3 m/s, 152 of its values past this tolerance.
 
 
 def fixture(name):
