@@ -165,7 +165,8 @@ def test_a_reduced_tile_mixes_in_the_coarse_level_only_where_it_drew_under_it(sc
 @pytest.mark.parametrize("schedule", ["tiles", "pixels"])
 def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
     """A frame whose sprites are all at full resolution (sparks, galaxy) does not read the reduced
-    layer in the composite (its ``has_lo`` argument 0; nor, per pixel, interpolate its rows:
+    layer in the composite (per tile its ``k`` argument 0: built without the layer's code; per
+    pixel its ``has_lo`` argument 0; nor, per pixel, interpolate its rows:
     ``lo_rows``), since ``tally`` counts the reduced and coarse levels' pairs: the same image as
     the path that reads it, which a frame with one big sprite still takes."""
     s = _small_scene(schedule, [
@@ -178,7 +179,7 @@ def test_a_frame_of_small_sprites_skips_the_reduced_rows(schedule):
     calls = []
     name = f"composite_{schedule}"
     composite, rows = R._k[name], R._k["lo_rows"]
-    at = [a.name for a in composite.kernel._primal.arguments].index("has_lo")
+    at = [a.name for a in composite.kernel._primal.arguments].index("k" if schedule == "tiles" else "has_lo")
     rows_calls = []
 
     def reading(*a):  # (this renderer's kernels only)

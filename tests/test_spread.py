@@ -62,10 +62,14 @@ def _busy(a: ti.types.ndarray(dtype=ti.f32, ndim=1)):
 def test_the_pinned_threads_are_the_pool_that_runs_kernels_one_cpu_each():
     """runtime.init held the CPU pool's workers one to a CPU of the process's set, in turn: the
     threads that do a parallel kernel's work (all but the launching one) are exactly among them,
-    each held to its own CPU."""
+    each held to its own CPU; a pool size no group of new threads has is not told apart."""
     runtime.reset()
+    before = affinity.threads_now()
     runtime.init("cpu", threads=2)
     pinned = runtime.pinned()
+    # the pool is the one group of exactly 2 new threads on one futex: no group of 3 is one
+    assert affinity.pool_workers(before, 2) == sorted(pinned)
+    assert affinity.pool_workers(before, 3) == []
     cpus = sorted(os.sched_getaffinity(0))
     assert len(pinned) == 2 and sorted(pinned.values()) == cpus[:2]
     for tid, cpu in pinned.items():
@@ -84,10 +88,8 @@ def test_the_pinned_threads_are_the_pool_that_runs_kernels_one_cpu_each():
     runtime.init("cpu")
 
 
-def test_pinning_is_off_where_asked_and_where_the_pool_is_not_told_apart(monkeypatch):
-    """PARTICLES_PIN_THREADS=0 pins nothing; nor does a pool no group of threads matches (no
-    thread started since the snapshot)."""
+def test_pinning_is_off_where_asked(monkeypatch):
+    """PARTICLES_PIN_THREADS=0 pins nothing, though every thread of the process is new to the
+    empty snapshot (the pool among them)."""
     monkeypatch.setenv("PARTICLES_PIN_THREADS", "0")
     assert affinity.pin_workers(set()) == {}
-    monkeypatch.delenv("PARTICLES_PIN_THREADS")
-    assert affinity.pool_workers(affinity.threads_now(), 2) == []

@@ -252,7 +252,7 @@ def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_dre
                              nd(v4, frame_bg), nd(ti.f32, depth), packed, out,
                              np.zeros(1, np.uint64), 0, dirty, dirty, np.int32([1]), edges,
                              np.zeros(TX * TY * 16, np.int32), 1, 1, 0, 0, TX, TY, W, H, 1, Wl, Hl, s,
-                             1, 1.0, 0.9, 0, 4)
+                             1.0, 0.9, 0, 4)
         return out.reshape(H, W)
 
     marked, computed = composite(0.0), composite(1e-30)

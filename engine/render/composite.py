@@ -195,11 +195,11 @@ def _build(uses_add: bool, uses_alpha: bool):
     def reduced_row(lo: ti.template(), dep: ti.template(), bgc: ti.template(), out: ti.template(), la, lb,
                     k0, px0, fy, exposure, Wl, k: ti.template(), bilateral):
         """A whole tile row (TILE pixels from k0 = y·W + px0) of the reduced layer alone over the
-        background, opaque RGBA (mode 0: ``finish_opaque``), from the reduced texels of rows la, lb (their first texels' indices): each
-        row's TILE/k + 2 texels loaded once, interpolated along x at each pixel (``row_lerp``),
-        then between the rows; all loads and table lookups first, then the stores (a store
-        through an ndarray makes every later load re-read its array's address: none come
-        between them). ``bilateral``: every pixel of the row takes ``upsample.lo_bilateral``'s
+        background, opaque RGBA (mode 0: ``finish_opaque``), from the reduced texels of rows la,
+        lb (their first texels' indices): each row's TILE/k + 2 texels loaded once, interpolated
+        along x at each pixel (``row_lerp``), then between the rows; all loads and table lookups
+        first, then the stores (a store through an ndarray makes every later load re-read its
+        array's address: none come between them). ``bilateral``: every pixel of the row takes ``upsample.lo_bilateral``'s
         weights instead (the horizon's band under smoke, where the receding floor's depth grows
         by more than 10 % a texel), the row's texel depths loaded once too: the per-pixel path
         took each pixel's quad by float floors and its eight loads again (explosion.toml at
@@ -253,7 +253,7 @@ def _build(uses_add: bool, uses_alpha: bool):
                         dirty_prev: ND_I1,
                         touched_lo: ND_I1, edges: ND_I1, edge_rows: ND_I1, ex0: ti.i32, ey0: ti.i32,
                         ex1: ti.i32, ey1: ti.i32, TX: ti.i32, TY: ti.i32, W: ti.i32, H: ti.i32,
-                        TXl: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32, has_lo: ti.i32, exposure: ti.f32,
+                        TXl: ti.i32, Wl: ti.i32, Hl: ti.i32, s: ti.f32, exposure: ti.f32,
                         shading: ti.f32, mode: ti.i32, k: ti.template()):
         """Full resolution, per tile: the tile's own layer over the upsampled reduced layer over
         the background, tone-mapped and packed. An untouched tile copies the packed background
@@ -268,12 +268,12 @@ def _build(uses_add: bool, uses_alpha: bool):
         2 / s pixels past its edge — or where soft bodies drew this frame or the last (``dirty``,
         ``dirty_prev``: a tile next to such a tile too).
 
-        ``k`` 0: this frame draws no reduced layer (``has_lo`` 0); its code is not compiled in, so a
+        ``k`` 0: this frame draws no reduced layer; its code is not compiled in, so a
         scene that never draws one (sparks, galaxy) does not build it: in sparks' warm start the
         composite's first call (its front end and the cached kernel's load) took 0.48 s, 0.06 s so
         (``Renderer.warm_levels`` compiles both for a loading screen).
 
-        The reduced layer (scale s = 1/k, k = 2 or 4; ``has_lo`` 1) is read from its texels in ``accA``: each
+        The reduced layer (scale s = 1/k, k = 2 or 4) is read from its texels in ``accA``: each
         pixel row's two reduced rows interpolated along x (``upsample.row_lerp``; a whole row of
         a tile loads its TILE/k + 2 texels of each once, ``reduced_row``), then between them.
         Before, a kernel of its own wrote every needed row interpolated at every full-resolution

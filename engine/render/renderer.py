@@ -190,7 +190,8 @@ class Renderer:
                 if self.mesh is not None:
                     self._downsample_depth(dep, W, H, at, Wk, k, 0, 0, Wk, Hk, t.dirty, prev, t.TX, 1)
         has_lo = self._splat(t, cam, dep, blend) if self.has_particles else 0
-        common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale, has_lo, exposure, self.shading, mode)
+        common = (t.TX, t.TY, W, H, t.TXl, t.Wl, t.Hl, t.scale)
+        tone = (exposure, self.shading, mode)
         if has_lo and self.schedule == "pixels":
             self._k["lo_rows"](t.accA, t.lo_rows, W, H, t.Wl, t.Hl, t.scale, t.touched_lo, t.TXl, t.TYl,
                                int(TILE * t.scale) + 3)
@@ -202,11 +203,11 @@ class Renderer:
                 ex1, ey1 = (rect[2] - 1) // TILE + 1, (rect[3] - 1) // TILE + 1
             self._k["composite_tiles"](t.tile_count, t.full_rows, t.accA, t.accB, bgc, dep, t.bg_packed,
                                        packed, *untouched_tiles(t, image, packed), t.dirty, t.dirty_prev if t.mesh else t.dirty,
-                                       t.touched_lo, t.edges, t.edge_rows, ex0, ey0, ex1, ey1, *common,
-                                       round(1 / t.scale) if has_lo else 0)
+                                       t.touched_lo, t.edges, t.edge_rows, ex0, ey0, ex1, ey1, *common, *tone,
+                                       round(1 / t.scale) if has_lo else 0)  # (k 0: no reduced layer this frame)
         else:
             self._k["composite_pixels"](t.pairs, t.tile_count, t.tile_start, t.accA, t.lo_rows, bgc,
-                                        dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common)
+                                        dep, t.bg_packed, packed, t.dirty, t.touched_lo, *common, has_lo, *tone)
         return image
 
     def warm_levels(self, camera, width: int, height: int) -> None:
