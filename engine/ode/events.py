@@ -124,15 +124,18 @@ def clear_of(events, dtype):
         ok = 1
         reach2 = span * span * ti.max(va.norm_sqr(), vb.norm_sqr())
         for k in ti.static(range(n_fn)):
-            ga, _gda, _Na = events.contact(k, xa, va, span)
             gb, _gdb, _Nb = events.contact(k, xb, vb, 0.0)
-            # nested tests, the reach first: a far point (most points, most steps) does not
-            # pay for the start's contact band
+            # nested tests, cheapest first: a point that ends farther from the surface than the
+            # step could carry it (most points, most steps) pays neither the start's contact nor
+            # its band. (reach ≤ g_b implies the test below: g_a ≥ 0 gives reach ≤ g_a + g_b,
+            # g_a < 0 is within the band; so the answers are the same, found sooner)
             if not (gb >= 0.0):
                 ok = 0
-            elif not (reach2 <= (ga + gb) * (ga + gb)):
-                if not (ga <= band(xa)):
-                    ok = 0
+            elif not (reach2 <= gb * gb):
+                ga, _gda, _Na = events.contact(k, xa, va, span)
+                if not (reach2 <= (ga + gb) * (ga + gb)):
+                    if not (ga <= band(xa)):
+                        ok = 0
         if ti.static(events.event_count < events.count):
             if ok != 0 and events.near_projected(xb) != 0:
                 ok = 0
