@@ -17,8 +17,10 @@ import taichi as ti
 
 from ..contacts import ContactBuffer
 from ..launch import data_oriented, fast
-from ..ode.events import doubling_error, fixed_error, located_step
+from ..geometry.shapes import PLANE, SPHERE
+from ..ode.events import doubling_error, far_from, fixed_error, located_step
 from ..ode.steppers import doubling_step, is_finite, make_step, scaled_error
+from .pool import LANES, lanes_of
 
 NO_FAILURE = 1e30  # sentinel in nonfinite_t: no particle went non-finite (f32 inf does not survive a field write)
 
@@ -78,7 +80,8 @@ class ParticleIntegrator:
     until the step is committed."""
 
     def __init__(self, state, accel, colliders, method: str, adaptive: bool, extrapolate=False,
-                 events: bool = False, contacts: int = 0, impacts: str = "located", quadratic: bool = False):
+                 events: bool = False, contacts: int = 0, impacts: str = "located", quadratic: bool = False,
+                 lanes: bool = True):
         self.state, self.cap = state, state.capacity
         self.nonfinite_t = ti.field(ti.f32, shape=())
         self.err = ti.field(ti.f32, shape=())
@@ -107,6 +110,21 @@ class ParticleIntegrator:
             # one, x1.43 with one site); step doubling's is three steps, so it takes one site
             # (a located adaptive RK4 kernel compiled in 10 s instead of 22)
             self.locate = located_step(stepper, colliders, 8, ti.f32, quadratic, first_apart=not adaptive)
+        # A fixed step without sub-emitters' events takes the pool's blocks of LANES slots side by
+        # side (step_fixed, _step_lanes) with no colliders, or with located impacts against
+        # planes and spheres that do not spin (their contact has no branches: engine.ode.events.
+        # far_from); projected impacts, step doubling and other shapes take a slot at a time, and
+        # so does a scene whose caller says ``lanes`` False: the lanes inline the acceleration
+        # LANES times more, and curl-noise turbulence made that costly to compile (smoke.toml's
+        # first run, no cache: symplectic Euler 5.3 -> 11.0 s, midpoint 6.0 -> 17.9, RK4
+        # 10.9 -> 69.7; sparks 3.8 -> 5.2). Compiled without Taichi's whole-kernel CSE the lanes
+        # were not vectorised (the bench's step as slow as slot by slot), so that is no way out.
+        self.lanes = bool(lanes) and state.blocked and not self.adaptive and not self.events and (not self.has_colliders or (
+            self.located and colliders.event_count == colliders.count
+            and all(kd in (PLANE, SPHERE) and not sp for kd, sp in zip(colliders.kinds, colliders.spins))))
+        if self.lanes and self.has_colliders:
+            self.far = far_from(colliders, ti.f32)
+        self.blocks = lanes_of(self.cap) // LANES
         if adaptive and self.located:
             n = max(1, self.cap)
             self.cand_hit = ti.field(ti.i32, shape=n)  # collider + 1 (0: none), negative: it stopped the particle
@@ -195,22 +213,92 @@ def _step_one(I: ti.template(), i, t: ti.template(), h: ti.template()):
             S.particle_age[i] += h  # not born yet
 
 
+@ti.func
+def _step_lanes(I: ti.template(), b, t: ti.template(), h: ti.template()):
+    """:func:`_step_one` for the LANES slots of block b side by side, as far as the plain step
+    goes: each live slot's step from its birth, written where it ends finite and (with colliders)
+    far from every surface (engine.ode.events.far_from). Returns the mask of the block's other
+    live slots (bit j: slot LANES·b + j; a step that could meet a surface, a birth after the
+    step, a non-finite end), which then take :func:`_step_one`. Each slot's arithmetic is the
+    slot-at-a-time step's, its last bits rounded as the compiler's vector code has it (fast
+    math reassociates: tests/test_step_lanes.py bounds the difference); the same bytes for any
+    thread count, and a slot's path depends on its own state only.
+
+    Without a branch until that mask, over neighbouring memory (engine.particles.pool), the
+    compiler makes one vector instruction of the lanes' four (the bench's 4M located step with
+    a ground plane 22-24 -> 11.5-12.3 ms, without colliders 8-11 -> 4.8-5.2, 2026-12-02),
+    provided the slow slots' step is not inlined here: it is taken after, from one call site
+    (four call sites here ran at the old speed; so did Python's ``and``, which branches)."""
+    S = I.state
+    # every lane's step, then every lane's stores (rows: lanes; static indices keep them in
+    # registers)
+    X0, V0 = ti.Matrix.zero(ti.f32, LANES, 3), ti.Matrix.zero(ti.f32, LANES, 3)
+    X1, V1 = ti.Matrix.zero(ti.f32, LANES, 3), ti.Matrix.zero(ti.f32, LANES, 3)
+    age, ok, alive = ti.Vector.zero(ti.f32, LANES), ti.Vector.zero(ti.i32, LANES), ti.Vector.zero(ti.i32, LANES)
+    for j in ti.static(range(LANES)):
+        i = b * LANES + j
+        x0, v0 = S.particle_pos[i], S.particle_vel[i]
+        age[j], alive[j] = S.particle_age[i], S.particle_alive[i]
+        a0 = ti.min(age[j], 0.0)  # < 0: born a0 seconds into this step
+        y1 = I.step(_pack(x0, ti.max(age[j], 0.0), v0), t - a0, h + a0, i)
+        x1, v1 = _x(y1), _v(y1)
+        # (bitwise: `and` would branch, and a branch ends the compiler's run of vectorisable code)
+        ok[j] = ti.cast(alive[j] != 0, ti.i32) & ti.cast(-a0 < h, ti.i32) & ti.cast(is_finite(x1.sum() + v1.sum()), ti.i32)
+        if ti.static(I.has_colliders):
+            ok[j] &= I.far(x1, v0, v1, h + a0)
+        for c in ti.static(range(3)):
+            X0[j, c], V0[j, c], X1[j, c], V1[j, c] = x0[c], v0[c], x1[c], v1[c]
+    for j in ti.static(range(LANES)):
+        S.particle_pos[b * LANES + j] = ti.select(ok[j] != 0, ti.Vector([X1[j, 0], X1[j, 1], X1[j, 2]]),
+                                                  ti.Vector([X0[j, 0], X0[j, 1], X0[j, 2]]))
+    for j in ti.static(range(LANES)):
+        S.particle_vel[b * LANES + j] = ti.select(ok[j] != 0, ti.Vector([V1[j, 0], V1[j, 1], V1[j, 2]]),
+                                                  ti.Vector([V0[j, 0], V0[j, 1], V0[j, 2]]))
+    slow = 0
+    for j in ti.static(range(LANES)):
+        i = b * LANES + j
+        a = age[j] + h
+        S.particle_age[i] = ti.select(ok[j] != 0, a, age[j])
+        S.particle_alive[i] = ti.select((ok[j] & ti.cast(a >= S.particle_life[i], ti.i32)) != 0, 0, alive[j])
+        slow |= (ti.cast(alive[j] != 0, ti.i32) & (1 - ok[j])) << j
+    return slow
+
+
+@ti.func
+def _step_block(I: ti.template(), b, t: ti.template(), h: ti.template()):
+    """Block b's slots stepped (:func:`_step_lanes`, then its slow slots one at a time)."""
+    slow = _step_lanes(I, b, t, h)
+    if slow != 0:
+        for q in range(LANES):
+            if (slow >> q) & 1 != 0:
+                _step_one(I, b * LANES + q, t, h)
+
+
 @ti.kernel
 def step_fixed(I: ti.template(), t: ti.f32, h: ti.f32):
     """One step of h from t for every particle."""
-    for i in range(I.cap):
-        _step_one(I, i, t, h)
+    if ti.static(I.lanes):
+        for b in range(I.blocks):
+            _step_block(I, b, t, h)
+    else:
+        for i in range(I.cap):
+            _step_one(I, i, t, h)
 
 
 @ti.kernel
 def step_fixed_run(I: ti.template(), t0: ti.f64, h: ti.f64, j: ti.i32, k: ti.i32):
-    """Steps j … j + k − 1 of h from t0 in one launch, each particle taking them in registers one
-    after the other: for a run of steps with nothing to do in between (no births due, colliders
-    still, no sub-emitters). Step m starts at t0 + m·h, rounded to f32 from f64 as a launch of
-    :func:`step_fixed` with that start would be: the same bytes as k launches."""
-    for i in range(I.cap):
-        for m in range(j, j + k):
-            _step_one(I, i, ti.cast(t0 + m * h, ti.f32), ti.cast(h, ti.f32))
+    """Steps j … j + k − 1 of h from t0 in one launch, each particle (each block of them) taking
+    them one after the other: for a run of steps with nothing to do in between (no births due,
+    colliders still, no sub-emitters). Step m starts at t0 + m·h, rounded to f32 from f64 as a
+    launch of :func:`step_fixed` with that start would be: the same bytes as k launches."""
+    if ti.static(I.lanes):
+        for b in range(I.blocks):
+            for m in range(j, j + k):
+                _step_block(I, b, ti.cast(t0 + m * h, ti.f32), ti.cast(h, ti.f32))
+    else:
+        for i in range(I.cap):
+            for m in range(j, j + k):
+                _step_one(I, i, ti.cast(t0 + m * h, ti.f32), ti.cast(h, ti.f32))
 
 
 @ti.kernel

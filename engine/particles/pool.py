@@ -59,6 +59,23 @@ class PoolLayout:
         del self.starts[n:], self.sizes[n:]
 
 
+LANES = 4  # slots a block (see ParticleState): the step's vectors, 4 f32 wide (SSE)
+# Pools of at least this many slots are kept in blocks and stepped LANES slots side by side: the
+# bench's located step at 4M ~1.9x faster, but its two step kernels took 0.97 -> 2.6 s each to
+# compile cold (sparks.toml; Taichi's whole-kernel CSE grows with the square of a task, and the
+# lanes share one with the slot-at-a-time step their slow slots take). A pool of the shipped
+# effects' size (17-30k slots) would save ~0.15 ms a frame for that: smaller pools keep one slot
+# per element of each field and their step, compile times and bytes.
+BLOCKED_FROM = 65536
+
+
+def lanes_of(capacity: int) -> int:
+    """The length of a blocked pool's per-slot fields: ``capacity`` (at least 1) rounded up to
+    whole blocks of LANES slots. The slots past ``capacity`` are never alive; kernels loop over
+    the capacity, the step over whole blocks (its last block's extra lanes change nothing)."""
+    return -(-max(1, capacity) // LANES) * LANES
+
+
 # the per-slot state every pool has (optional ones are listed in ParticleState's docstring)
 PARTICLE_FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_life", "particle_alive",
                    "particle_emitter", "particle_rand")
@@ -66,7 +83,8 @@ PARTICLE_FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_lif
 
 @data_oriented
 class ParticleState:
-    """State of every slot, shape (capacity,):
+    """State of every slot, shape (capacity,) — (lanes_of(capacity),) for a pool kept in blocks
+    (``blocked``: at least BLOCKED_FROM slots; the slots past the capacity unused):
 
     ``particle_pos`` (vec3 f32, m), ``particle_vel`` (vec3 f32, m/s), ``particle_age`` and
     ``particle_life`` (f32, s), ``particle_alive`` (i32 0/1), ``particle_emitter`` (i32),
@@ -80,13 +98,31 @@ class ParticleState:
     """
 
     def __init__(self, capacity: int, adaptive: bool, events: bool = False, interpolate: bool = False):
-        n = max(1, capacity)
         self.capacity = capacity
+        self.blocked = capacity >= BLOCKED_FROM
+        n = lanes_of(capacity) if self.blocked else max(1, capacity)
         vec3 = lambda: ti.Vector.field(3, ti.f32, shape=n)  # noqa: E731
         scalar = lambda dtype: ti.field(dtype, shape=n)  # noqa: E731
-        self.particle_pos, self.particle_vel = vec3(), vec3()
-        self.particle_age, self.particle_life = scalar(ti.f32), scalar(ti.f32)
-        self.particle_alive, self.particle_emitter = scalar(ti.i32), scalar(ti.i32)
+        if self.blocked:
+            # What the step reads and writes, in blocks of LANES slots, each field's LANES values
+            # together (x of slots 4b..4b+3, then their y, ..., their alive flags: 144 bytes a
+            # block): the step over a block's slots side by side loads and stores whole vectors
+            # (engine.particles.integrate._step_lanes; a slot a field apart, the compiler cannot
+            # tell that slots 4b and 4b + 1 are neighbours in memory).
+            self.particle_pos, self.particle_vel = ti.Vector.field(3, ti.f32), ti.Vector.field(3, ti.f32)
+            self.particle_age, self.particle_life = ti.field(ti.f32), ti.field(ti.f32)
+            self.particle_alive = ti.field(ti.i32)
+            block = ti.root.dense(ti.i, n // LANES)
+            for f in (self.particle_pos, self.particle_vel):
+                for c in range(3):
+                    block.dense(ti.i, LANES).place(f.get_scalar_field(c))
+            for f in (self.particle_age, self.particle_life, self.particle_alive):
+                block.dense(ti.i, LANES).place(f)
+        else:
+            self.particle_pos, self.particle_vel = vec3(), vec3()
+            self.particle_age, self.particle_life = scalar(ti.f32), scalar(ti.f32)
+            self.particle_alive = scalar(ti.i32)
+        self.particle_emitter = scalar(ti.i32)
         self.particle_rand = scalar(ti.f32)
         if events:  # sub-emitters: what happened to each particle during the last step
             self.particle_event = scalar(ti.i32)  # bit 1 died, bit 2 hit a collider

@@ -74,7 +74,8 @@ class ParticleSystem(SystemBase):
         self.integrator = ParticleIntegrator(self.state, self.forces.make_accel(), colliders,
                                              self.method, self.adaptive, sol.extrapolate,
                                              events=self.emitters.uses_events, contacts=contacts,
-                                             impacts=sol.impacts, quadratic=self.forces.names == ["gravity"])
+                                             impacts=sol.impacts, quadratic=self.forces.names == ["gravity"],
+                                             lanes=not self.forces.use_turbulence)
         # a scene without interact imports, allocates and compiles none of it; with it, an adaptive
         # step never grows past the configured h (the constraint solve's stability is set there)
         self.interact = None
