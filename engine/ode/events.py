@@ -124,18 +124,15 @@ def clear_of(events, dtype):
         ok = 1
         reach2 = span * span * ti.max(va.norm_sqr(), vb.norm_sqr())
         for k in ti.static(range(n_fn)):
+            ga, _gda, _Na = events.contact(k, xa, va, span)
             gb, _gdb, _Nb = events.contact(k, xb, vb, 0.0)
-            # nested tests, cheapest first: a point that ends farther from the surface than the
-            # step could carry it (most points, most steps) pays neither the start's contact nor
-            # its band. (reach ≤ g_b implies the test below: g_a ≥ 0 gives reach ≤ g_a + g_b,
-            # g_a < 0 is within the band; so the answers are the same, found sooner)
+            # nested tests, the reach first: a far point (most points, most steps) does not
+            # pay for the start's contact band
             if not (gb >= 0.0):
                 ok = 0
-            elif not (reach2 <= gb * gb):
-                ga, _gda, _Na = events.contact(k, xa, va, span)
-                if not (reach2 <= (ga + gb) * (ga + gb)):
-                    if not (ga <= band(xa)):
-                        ok = 0
+            elif not (reach2 <= (ga + gb) * (ga + gb)):
+                if not (ga <= band(xa)):
+                    ok = 0
         if ti.static(events.event_count < events.count):
             if ok != 0 and events.near_projected(xb) != 0:
                 ok = 0
@@ -147,9 +144,12 @@ def clear_of(events, dtype):
 def far_from(events, dtype):
     """``far(xb, va, vb, span) -> 1 | 0``: 1 when the step that ends at xb, from velocity va to vb
     over ``span``, ends outside every surface of ``events`` by more than it could travel,
-    span·max(|va|, |vb|) ≤ g_b: the first of :func:`clear_of`'s tests, which implies its answer
-    (so a caller that takes the plain step where ``far`` says 1 and asks ``clear`` elsewhere
-    gets the same steps). Without branches — every contact's test evaluated, the answers ANDed —
+    span·max(|va|, |vb|) ≤ g_b. That implies :func:`clear_of`'s answer (g_a ≥ 0 gives
+    reach ≤ g_a + g_b; g_a < 0 lies within the contact band), so a caller that takes the plain
+    step where ``far`` says 1 and asks ``clear`` elsewhere takes the same steps. (Asked first
+    inside ``clear`` itself it saved ~9 % of the slot-at-a-time step, but its start's contact,
+    no longer shared with the located path's, rounded differently there: sparks.toml's frames
+    moved.) Without branches — every contact's test evaluated, the answers ANDed —
     so the same code for neighbouring elements becomes vector instructions (the particles'
     blocks, engine.particles.integrate); for an event set with no shapes met by projection only."""
     if events.event_count < events.count:
