@@ -117,11 +117,11 @@ class ParticleIntegrator:
         # so does a scene whose caller says ``lanes`` False: the lanes inline the acceleration
         # LANES times more, and curl-noise turbulence made that costly to compile (smoke.toml's
         # first run, no cache: symplectic Euler 5.3 -> 11.0 s, midpoint 6.0 -> 17.9, RK4
-        # 10.9 -> 69.7; sparks 3.8 -> 5.2). Compiled without Taichi's whole-kernel CSE the lanes
-        # were not vectorised (the bench's step as slow as slot by slot), so that is no way out.
-        self.lanes = bool(lanes) and state.blocked and not self.adaptive and not self.events and (not self.has_colliders or (
-            self.located and colliders.event_count == colliders.count
-            and all(kd in (PLANE, SPHERE) and not sp for kd, sp in zip(colliders.kinds, colliders.spins))))
+        # 10.9 -> 69.7; sparks 3.2-3.8 -> 5.2-6.2). Compiled without Taichi's whole-kernel CSE
+        # the lanes were not vectorised (the bench's step as slow as slot by slot): no way out.
+        self.lanes = bool(lanes) and state.blocked and not self.adaptive and not self.events and (
+            not self.has_colliders or self.located and colliders.event_count == colliders.count
+            and all(kd in (PLANE, SPHERE) and not sp for kd, sp in zip(colliders.kinds, colliders.spins)))
         if self.lanes and self.has_colliders:
             self.far = far_from(colliders, ti.f32)
         self.blocks = lanes_of(self.cap) // LANES
