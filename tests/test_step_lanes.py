@@ -58,6 +58,7 @@ def test_lanes_step_what_the_slot_at_a_time_step_does():
     sphere: 1.9e-5 m and 8.2e-5 m/s apart at most, 2026-12-02), with the same births, deaths and
     contacts."""
     a, b = bouncing(BLOCKED_FROM - 3), bouncing(BLOCKED_FROM + 3)
+    assert not a.particles.integrator.lanes and b.particles.integrator.lanes  # the two paths compared
     for _ in range(round(1.8 / H)):
         a.advance(H)
         b.advance(H)

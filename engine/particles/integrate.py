@@ -226,7 +226,8 @@ def _step_lanes(I: ti.template(), b, t: ti.template(), h: ti.template()):
 
     Without a branch until that mask, over neighbouring memory (engine.particles.pool), the
     compiler makes one vector instruction of the lanes' four (the bench's 4M located step with
-    a ground plane 22-24 -> 11.5-12.3 ms, without colliders 8-11 -> 4.8-5.2, 2026-12-02),
+    a ground plane 18.9/22.8 -> 11.7/12.3 ms, without colliders 7.7/9.7 -> 4.8/5.1, alternating
+    processes, 2026-12-02),
     provided the slow slots' step is not inlined here: it is taken after, from one call site
     (four call sites here ran at the old speed; so did Python's ``and``, which branches)."""
     S = I.state
