@@ -88,37 +88,54 @@ def test_a_run_of_steps_is_the_bytes_of_its_steps_one_launch_each():
 
 
 @ti.kernel
-def _far_and_clear(far: ti.template(), clear: ti.template(), xa: ti.types.ndarray(), va: ti.types.ndarray(),
-                   xb: ti.types.ndarray(), vb: ti.types.ndarray(), out: ti.types.ndarray(), span: ti.f32):
+def _settle_and_locate(I: ti.template(), xa: ti.types.ndarray(), va: ti.types.ndarray(), xo: ti.types.ndarray(),
+                       vo: ti.types.ndarray(), out: ti.types.ndarray(), h: ti.f32):
+    """Row i: the plain step of (xa, va) over h, ``settle``'s answer on it (xo/vo[i, 0], out[i, 0:2]:
+    ok, held) and the located step's (xo/vo[i, 1], out[i, 2:4]: impacts located, contact k)."""
     for i in range(out.shape[0]):
-        a = ti.Vector([xa[i, 0], xa[i, 1], xa[i, 2]])
-        u = ti.Vector([va[i, 0], va[i, 1], va[i, 2]])
-        b = ti.Vector([xb[i, 0], xb[i, 1], xb[i, 2]])
-        w = ti.Vector([vb[i, 0], vb[i, 1], vb[i, 2]])
-        out[i, 0] = far(b, u, w, span)
-        out[i, 1] = clear(a, u, b, w, span)
+        x0 = ti.Vector([xa[i, 0], xa[i, 1], xa[i, 2]])
+        v0 = ti.Vector([va[i, 0], va[i, 1], va[i, 2]])
+        y0 = integrate._pack(x0, 0.0, v0)
+        y1 = I.step(y0, 0.0, h, i)
+        ok, xs, vs, held = I.settle(x0, v0, integrate._x(y1), integrate._v(y1), h)
+        y, _err, count, k, _lag, _xh, _nh, _speed, _dv, _stopped = I.locate(y0, 0.0, h, i, 1.0, 1.0, 0.0)
+        for c in ti.static(range(3)):
+            xo[i, 0, c], vo[i, 0, c] = xs[c], vs[c]
+            xo[i, 1, c], vo[i, 1, c] = y[c], y[4 + c]
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = ok, held, count, k
 
 
-def test_far_from_a_surface_implies_clear_of_it():
-    """``far_from``'s branch-free test answers 1 only where ``clear_of`` does (so the lanes take
-    the plain step only where the slot-at-a-time step would), over steps near and through a
-    plane and a sphere, and answers 1 for most steps that start and end well away."""
-    from engine.ode.events import clear_of, far_from
-
+def test_settled_steps_are_the_located_steps_answers():
+    """Where ``settle`` (engine.ode.events.settled: the lanes' branch-free test) lets a step
+    through, the located step locates nothing and ends where ``settle`` says: the plain step's
+    end, or a plane's held contact (then the located step reports that plane). Over steps near,
+    along and onto a ground plane and a sphere, resting points included; most of them are
+    settled: the points at rest on the ground, and those that skim it without a contact."""
     s = bouncing(BLOCKED_FROM)
-    C = s.particles.integrator.colliders
+    I = s.particles.integrator
     rng = np.random.default_rng(3)
-    n, span = 200_000, np.float32(1 / 60)
-    xa = rng.uniform([-1, -0.2, -0.5], [1, 1.0, 0.5], (n, 3)).astype(np.float32)
-    va = rng.normal(0, 3, (n, 3)).astype(np.float32)
-    vb = (va + rng.normal(0, 0.5, (n, 3))).astype(np.float32)
-    xb = (xa + span * 0.5 * (va + vb)).astype(np.float32)
-    out = np.zeros((n, 2), np.int32)
-    _far_and_clear(far_from(C, ti.f32), clear_of(C, ti.f32), xa, va, xb, vb, out, span)
-    far, clear = out[:, 0] != 0, out[:, 1] != 0
-    assert not (far & ~clear).any()
-    away = (xa[:, 1] > 0.3) & (xb[:, 1] > 0.3) & (np.linalg.norm(xa - [0.4, 0.25, 0.0], axis=1) > 0.6)
-    assert far[away].mean() > 0.95 and 0.05 < (clear & ~far).mean() + (~clear).mean()
+    n, h = 240_000, np.float32(H)
+    xa = rng.uniform([-1, -0.01, -0.5], [1, 0.6, 0.5], (n, 3)).astype(np.float32)
+    va = rng.normal(0, 2, (n, 3)).astype(np.float32)
+    rest = slice(0, n // 4)  # on the ground, at rest or sliding
+    xa[rest, 1], va[rest, 1] = 0.0, 0.0
+    skim = slice(n // 4, n // 2)  # just above the ground, moving mostly along it
+    xa[skim, 1] = rng.uniform(0, 2e-3, n // 4)
+    va[skim, 1] = rng.normal(0, 0.05, n // 4)
+    xo, vo = np.zeros((n, 2, 3), np.float32), np.zeros((n, 2, 3), np.float32)
+    out = np.zeros((n, 4), np.int32)
+    _settle_and_locate(I, xa, va, xo, vo, out, h)
+    ok, held, count, k = (out[:, c] for c in range(4))
+    ok, held = ok != 0, held != 0
+    assert (count[ok] == 0).all()
+    assert (k[ok & held] == 0).all() and (k[ok & ~held] == -1).all()  # the plane (collider 0) held them
+    np.testing.assert_allclose(xo[ok, 0], xo[ok, 1], rtol=0, atol=2e-6)
+    np.testing.assert_allclose(vo[ok, 0], vo[ok, 1], rtol=0, atol=2e-5)
+    away = np.linalg.norm(xa - [0.4, 0.25, 0.0], axis=1) > 0.5  # far from the sphere
+    assert held[rest].mean() > 0.6 and ok[rest][away[rest]].mean() > 0.99
+    quiet = (count == 0) & (k == -1) & away  # steps the located step ends without a contact
+    assert ok[skim][quiet[skim]].mean() > 0.99 and ok[quiet].mean() > 0.99
+    assert 0.01 < (~ok).mean() < 0.2  # impacts are left to the located step
 
 
 PROBE = """
