@@ -261,7 +261,7 @@ def _step_lanes(I: ti.template(), b, t: ti.template(), h: ti.template()):
         # settling made the bench's 4M step slower where few particles had landed yet). A slot
         # at rest on a plane or skimming it stays in the lanes: the bench's 4M located step
         # after 200 steps (~8 % of the particles on the ground) 34.0 -> 23.6 ms, after 34 steps
-        # 13.7-14.8 -> 13.0-13.4 ms; at 1M after 34 steps equal (2.74 / 2.80), in one process
+        # 13.7-15.7 -> 13.0-14.8 ms; at 1M after 34 steps equal (2.74 / 2.80), in one process
         # on an Intel Xeon, 2026-12-02
         if near.sum() != 0:
             for j in ti.static(range(LANES)):
