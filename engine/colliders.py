@@ -346,26 +346,19 @@ class Colliders(ShapePoses, ProjectedShapes):
 
     @ti.func
     def hold(self, k: ti.template(), x, v, dv, g, N):
-        """:meth:`project`'s response to shape k alone at the step's end, given its (g, N) at x
-        (k does not spin): (x on the surface, v'), :meth:`_bounce`'s values without its branches
-        (selects), so that neighbouring points' responses become vector instructions
-        (engine.ode.events.settled, the particles' blocks). _bounce keeps its branches: written
-        with these selects it rounded differently in the shipped configs (debris' and
-        explosion's frames moved)."""
-        x = x - g * N
-        vc = self.collider_vel[k]
+        """:meth:`project`'s response to shape k alone (not spinning) given its (g, N) at x:
+        (x on the surface, v'), :meth:`_bounce`'s values by selects, no branches, so neighbouring
+        points' responses vectorise (engine.ode.lanes.settled). (_bounce in this form moved
+        debris' and explosion's frames by rounding: it keeps its branches.)"""
+        vc, e, mu = self.collider_vel[k], self.collider_restitution[k], self.collider_friction[k]
         vr = v - vc
         vn_s = vr.dot(N)
         speed = ti.max(-vn_s, 0.0)
-        e = ti.select(self.collider_restitution[k] * speed <= ti.max(-N.dot(dv), 0.0),
-                      ti.cast(0.0, self.dtype), self.collider_restitution[k])
-        vn = vn_s * N
-        vt = vr - vn
+        e = ti.select(e * speed <= ti.max(-N.dot(dv), 0.0), ti.cast(0.0, self.dtype), e)
+        vt = vr - vn_s * N
         vt_len = vt.norm()
-        scale = ti.select(vt_len > 1e-12,
-                          ti.max(0.0, 1.0 - self.collider_friction[k] * (1.0 + e) * speed / ti.max(vt_len, 1e-12)),
-                          ti.cast(0.0, self.dtype))
-        return x, ti.select(vn_s < 0.0, scale * vt - e * vn + vc, v)
+        scale = ti.select(vt_len > 1e-12, ti.max(0.0, 1.0 - mu * (1.0 + e) * speed / ti.max(vt_len, 1e-12)), 0.0)
+        return x - g * N, ti.select(vn_s < 0.0, scale * vt - e * (vn_s * N) + vc, v)
 
     @ti.func
     def project(self, x, v, x0, v0, h):

@@ -106,7 +106,7 @@ def _settle_and_locate(I: ti.template(), xa: ti.types.ndarray(), va: ti.types.nd
 
 
 def test_settled_steps_are_the_located_steps_answers():
-    """Where ``settle`` (engine.ode.events.settled: the lanes' branch-free test) lets a step
+    """Where ``settle`` (engine.ode.lanes.settled: the lanes' branch-free test) lets a step
     through, the located step locates nothing and ends where ``settle`` says: the plain step's
     end, or a plane's held contact (then the located step reports that plane). Over steps near,
     along and onto a ground plane and a sphere, resting points included; most of them are

@@ -18,7 +18,8 @@ import taichi as ti
 from ..contacts import ContactBuffer
 from ..launch import data_oriented, fast
 from ..geometry.shapes import PLANE, SPHERE
-from ..ode.events import doubling_error, far_from, fixed_error, located_step, settled
+from ..ode.events import doubling_error, fixed_error, located_step
+from ..ode.lanes import far_from, settled
 from ..ode.steppers import doubling_step, is_finite, make_step, scaled_error
 from .pool import LANES, lanes_of
 
@@ -219,7 +220,7 @@ def _step_one(I: ti.template(), i, t: ti.template(), h: ti.template()):
 def _step_lanes(I: ti.template(), b, t: ti.template(), h: ti.template()):
     """:func:`_step_one` for the LANES slots of block b side by side, as far as the plain step
     goes: each live slot's step from its birth, written where it ends finite and (with colliders)
-    meets no surface, or rests on a plane that holds it there (engine.ode.events.settled: the
+    meets no surface, or rests on a plane that holds it there (engine.ode.lanes.settled: the
     located step's answer where it locates no impact). Returns the mask of the block's other
     live slots (bit j: slot LANES·b + j; a step with an impact to locate, a birth after the
     step, a non-finite end), which then take :func:`_step_one`, and how many slots a plane held
