@@ -113,8 +113,7 @@ class ParticleIntegrator:
             self.locate = located_step(stepper, colliders, 8, ti.f32, quadratic, first_apart=not adaptive)
         # A fixed step without sub-emitters' events takes the pool's blocks of LANES slots side by
         # side (step_fixed, _step_lanes) with no colliders, or with located impacts against
-        # planes and spheres that do not spin (their contact has no branches: engine.ode.events.
-        # settled); projected impacts, step doubling and other shapes take a slot at a time, and
+        # planes and spheres that do not spin (their contact has no branches: engine.ode.lanes); projected impacts, step doubling and other shapes take a slot at a time, and
         # so does a scene whose caller says ``lanes`` False: the lanes inline the acceleration
         # LANES times more, and curl-noise turbulence made that costly to compile (smoke.toml's
         # first run, no cache: symplectic Euler 5.3 -> 11.0 s, midpoint 6.0 -> 17.9, RK4
@@ -224,9 +223,10 @@ def _step_lanes(I: ti.template(), b, t: ti.template(), h: ti.template()):
     located step's answer where it locates no impact). Returns the mask of the block's other
     live slots (bit j: slot LANES·b + j; a step with an impact to locate, a birth after the
     step, a non-finite end), which then take :func:`_step_one`, and how many slots a plane held
-    here. Each slot's arithmetic is the slot-at-a-time step's, its last bits rounded as the compiler's vector code has it (fast
-    math reassociates: tests/test_step_lanes.py bounds the difference); the same bytes for any
-    thread count, and a slot's path depends on its own state only.
+    here. Each slot's arithmetic is the slot-at-a-time step's, its last bits rounded as the
+    compiler's vector code has it (fast math reassociates: tests/test_step_lanes.py bounds the
+    difference); the same bytes for any thread count, and a slot's path depends on its own state
+    only.
 
     Without a branch until that mask, over neighbouring memory (engine.particles.pool), the
     compiler makes one vector instruction of the lanes' four (the bench's 4M located step with
@@ -261,7 +261,7 @@ def _step_lanes(I: ti.template(), b, t: ti.template(), h: ti.template()):
         # without branches; the others pay the bound test only (asked of every block, the
         # settling made the bench's 4M step slower where few particles had landed yet). A slot
         # at rest on a plane or skimming it stays in the lanes: the bench's 4M located step
-        # after 200 steps (~8 % of the particles on the ground) 34.0 -> 23.6 ms, after 34 steps
+        # after 200 steps (~7 % of the particles on the ground) 34.0 -> 23.6 ms, after 34 steps
         # 13.7-15.7 -> 13.0-14.8 ms; at 1M after 34 steps equal (2.74 / 2.80), in one process
         # on an Intel Xeon, 2026-12-02
         if near.sum() != 0:
