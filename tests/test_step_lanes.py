@@ -1,6 +1,7 @@
 """Pools of at least BLOCKED_FROM slots: kept in blocks of LANES slots and stepped LANES slots side
-by side (engine.particles.pool, engine.particles.integrate._step_lanes), the slots whose step could
-meet a surface, or is a birth's or ends non-finite, then slot by slot."""
+by side (engine.particles.pool, engine.particles.integrate._step_lanes), the steps that settle
+without locating an impact included (engine.ode.lanes); the slots whose step has an impact to
+locate, or is a birth's or ends non-finite, then slot by slot."""
 import numpy as np
 import pytest
 import taichi as ti
@@ -70,7 +71,7 @@ def test_lanes_step_what_the_slot_at_a_time_step_does():
     np.testing.assert_allclose(pb["position"], pa["position"], rtol=0, atol=2e-4)
     np.testing.assert_allclose(pb["velocity"], pa["velocity"], rtol=0, atol=2e-3)
     y = pa["position"][:, 1]
-    assert (y < 1e-3).mean() > 0.3  # many came to rest on the ground: the slow slots are exercised
+    assert (y < 1e-3).mean() > 0.3  # many came to rest on the ground: held contacts are exercised
     assert abs(hits[0] - hits[1]) <= 1e-4 * hits[0] and hits[0] > 1e6
 
 
