@@ -225,6 +225,31 @@ def _build(uses_add: bool, uses_alpha: bool):
             out[k0 + dx] = vals[dx]
 
     @ti.func
+    def reduced_rows(lo: ti.template(), bgc: ti.template(), out: ti.template(), la, lb, y0, y1, px0, W,
+                     s, exposure, Wl, k: ti.template()):
+        """Pixel rows y0..y1 of a tile (TILE pixels from px0 each), all reading the reduced
+        rows la, lb (their first texels' indices) bilinearly, opaque RGBA (mode 0): what
+        ``reduced_row`` gives each row with ``bilateral`` 0, bit for bit, with the rows' lerps
+        along x taken once for them all (the same expressions: each pixel's two ``row_lerp``
+        values depend on its column and the two rows only) and each row's own vertical lerp."""
+        i0 = (px0 // k) - 1  # the texel left of the rows' first pixel (px0 a multiple of TILE)
+        ta = [lo[la + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
+        tb = [lo[lb + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
+        place = ti.static([row_place(dx, k) for dx in range(TILE)])  # (n, fx) of each column
+        ha = [(1.0 - place[dx][1]) * ta[place[dx][0]] + place[dx][1] * ta[place[dx][0] + 1]
+              for dx in ti.static(range(TILE))]
+        hb = [(1.0 - place[dx][1]) * tb[place[dx][0]] + place[dx][1] * tb[place[dx][0] + 1]
+              for dx in ti.static(range(TILE))]
+        for y in range(y0, y1 + 1):
+            v = (y + 0.5) * s - 0.5  # (fy as the composite's row loop takes it)
+            fy = v - ti.cast(ti.floor(v), ti.i32)
+            vals = ti.Vector([0] * TILE, dt=ti.u32)
+            for dx in ti.static(range(TILE)):
+                vals[dx] = finish_opaque(bgc[y * W + px0 + dx], (1.0 - fy) * ha[dx] + fy * hb[dx], exposure)
+            for dx in ti.static(range(TILE)):
+                out[y * W + px0 + dx] = vals[dx]
+
+    @ti.func
     def bg_pixel(bg_packed: ti.template(), k):
         """Pixel k of the packed background (two pixels to a u64, the lower one in the low half:
         bytes in pixel order on a little-endian machine)."""
@@ -326,7 +351,10 @@ def _build(uses_add: bool, uses_alpha: bool):
                             # bit j - jt: reduced row j is the empty layer under the tile
                             if near != 0 and dirty[t] == 0 and drawn != (1 << (py1 - py0 + 1)) - 1:
                                 empty = empty_rows(accA, jt, ti.min(lo_row(py1, k) + 1, Hl - 1), px0, px1, W * H, Wl, k)
+                        grouped = -1  # the last row drawn with the rows before it (``reduced_rows``)
                         for y in range(py0, py1 + 1):
+                            if y <= grouped:
+                                continue
                             full_here = (drawn >> (y - py0)) & 1
                             fy, ra, rb, mask = 0.0, 0, 0, 0
                             done = 0  # the row drawn under the reduced layer alone
@@ -340,6 +368,18 @@ def _build(uses_add: bool, uses_alpha: bool):
                                 ra, rb = W * H + ja * Wl, W * H + jb * Wl  # (the reduced rows' first texels)
                                 if edge != 0:
                                     mask = edge_rows[t * TILE + y - py0]
+                                if edge == 0 and mode == 0 and px1 - px0 == TILE - 1 and near != 0:
+                                    # the rows that read the same two reduced rows (k of them, fewer at
+                                    # the tile's edges) drawn at once, where none takes the full layer
+                                    # and the two rows are not both empty
+                                    y1 = y
+                                    while y1 < py1 and lo_row(y1 + 1, k) == j0:
+                                        y1 += 1
+                                    if (drawn >> (y - py0)) & ((1 << (y1 - y + 1)) - 1) == 0 and not (
+                                            dirty[t] == 0 and (empty >> (ja - jt)) & (empty >> (jb - jt)) & 1 != 0):
+                                        reduced_rows(accA, bgc, out, ra, rb, y, y1, px0, W, s, exposure, Wl, k)
+                                        grouped = y1
+                                        continue
                                 if full_here == 0 and near != 0:
                                     done = 1
                                     if dirty[t] == 0 and (empty >> (ja - jt)) & (empty >> (jb - jt)) & 1 != 0:
