@@ -201,6 +201,37 @@ def test_whole_rows_under_the_reduced_layer_draw_what_the_per_pixel_path_draws()
     assert d.max() <= 1 and (d > 0).mean() < 1e-3, (d.max(), (d > 0).mean())
 
 
+def test_rows_drawn_together_draw_what_the_per_pixel_path_draws():
+    """The rows of a tile that read the same two reduced rows bilinearly are drawn together in
+    the usual byte order (``reduced_rows``), those its own sprites drew in too (the full layer over
+    the reduced one): they equal what the per-pixel path draws for them, which the BGRA byte order
+    takes, R and B swapped back — off by at most one step in a handful of pixels, as above
+    (rounding). Not vacuous: rows of tiles without a bilateral pixel, where a sprite of the tile
+    drew and the reduced texels under them are not empty, are there (a full layer left out or
+    taken from another row fails it)."""
+    s = drawn_scene("configs/flames.toml", frames=40, size=(320, 180), particle_resolution=0.25)
+    rgba = s.render(320, 180).astype(int)
+    t = s.renderer.targets(320, 180)
+    plain = t.edges.to_numpy() == 0
+    counts, rows = t.tile_count.to_numpy()[:t.T0], t.full_rows.to_numpy()
+    layer = t.accA.to_numpy()[t.LO:t.LO + t.Wl * t.Hl].reshape(t.Hl, t.Wl, 4)
+    drawn = ~(layer == (0.0, 0.0, 0.0, 1.0)).all(-1)
+    both = 0
+    for tile in np.flatnonzero(plain & (counts > 0)):
+        px0, py0 = (tile % t.TX) * 16, (tile // t.TX) * 16
+        if px0 + 16 > t.W:
+            continue  # (a partial tile takes the per-pixel path in either order)
+        for y in range(py0, min(t.H, py0 + 16)):
+            j0 = int(np.floor((y + 0.5) * t.scale - 0.5))
+            under = np.clip([j0, j0 + 1], 0, t.Hl - 1)
+            cols = slice(max(0, (px0 - 2) // 4), (px0 + 15 - 2) // 4 + 2)
+            both += int((rows[tile] >> (y - py0)) & 1 == 1 and drawn[under][:, cols].any())
+    assert both >= 16, both  # rows with both layers, drawn together
+    bgra = s.render(320, 180, bgra=True).astype(int)[..., [2, 1, 0, 3]]
+    d = np.abs(rgba - bgra)
+    assert d.max() <= 1 and (d > 0).mean() < 1e-3, (d.max(), (d > 0).mean())
+
+
 @pytest.mark.parametrize("edge", [False, True])
 def test_an_empty_reduced_row_shows_the_packed_background_only_where_no_body_drew(edge):
     """``composite_tiles`` shows a tile row whose two reduced rows are the empty layer

@@ -225,13 +225,20 @@ def _build(uses_add: bool, uses_alpha: bool):
             out[k0 + dx] = vals[dx]
 
     @ti.func
-    def reduced_rows(lo: ti.template(), bgc: ti.template(), out: ti.template(), la, lb, y0, y1, px0, W,
-                     s, exposure, Wl, k: ti.template()):
-        """Pixel rows y0..y1 of a tile (TILE pixels from px0 each), all reading the reduced
-        rows la, lb (their first texels' indices) bilinearly, opaque RGBA (mode 0): what
-        ``reduced_row`` gives each row with ``bilateral`` 0, bit for bit, with the rows' lerps
-        along x taken once for them all (the same expressions: each pixel's two ``row_lerp``
-        values depend on its column and the two rows only) and each row's own vertical lerp."""
+    def reduced_rows(lo: ti.template(), accB: ti.template(), bgc: ti.template(), out: ti.template(), la, lb, y0,
+                     y1, px0, py0, W, s, drawn, ab, aw, exposure, shading, Wl, k: ti.template()):
+        """Pixel rows y0..y1 of a tile (TILE pixels from px0 each, tile rows from py0), all reading
+        the reduced rows la, lb (their first texels' indices in ``lo``, which is ``accA``)
+        bilinearly, opaque RGBA (mode 0), bit for bit what the row-at-a-time paths give them:
+        the rows' lerps along x (``row_lerp``'s values: they depend on the column and the two rows
+        only) taken once for them all, then per pixel its row's vertical lerp, the background
+        under it and, in a row its tile's sprites drew in (bit y − py0 of ``drawn``), the full
+        layer over it (``acc_layer`` at ab + y·aw + x: ``tile_rows``) — ``finish(bg, low, full,
+        exposure, 0)``'s colour, its alpha 255 as ``finish_opaque``'s (without a full layer, its
+        c·1 + 0 is c). A loop over the row's pixels, the lerps in a local matrix: unrolled over
+        the row (16 copies), the rows without a full layer took flames.toml's composite at
+        1280×720 from 3.55 to 3.19 ms; this way, every row, 3.64 → 3.07 (best of 31, one process;
+        the tile's rows with sprites had taken the per-pixel loop at ~0.5 ms of it)."""
         i0 = (px0 // k) - 1  # the texel left of the rows' first pixel (px0 a multiple of TILE)
         ta = [lo[la + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
         tb = [lo[lb + ti.min(ti.max(i0 + n, 0), Wl - 1)] for n in ti.static(range(TILE // k + 2))]
@@ -240,14 +247,21 @@ def _build(uses_add: bool, uses_alpha: bool):
               for dx in ti.static(range(TILE))]
         hb = [(1.0 - place[dx][1]) * tb[place[dx][0]] + place[dx][1] * tb[place[dx][0] + 1]
               for dx in ti.static(range(TILE))]
+        HA = ti.Matrix([[ha[dx][c] for c in ti.static(range(4))] for dx in ti.static(range(TILE))])
+        HB = ti.Matrix([[hb[dx][c] for c in ti.static(range(4))] for dx in ti.static(range(TILE))])
         for y in range(y0, y1 + 1):
             v = (y + 0.5) * s - 0.5  # (fy as the composite's row loop takes it)
             fy = v - ti.cast(ti.floor(v), ti.i32)
-            vals = ti.Vector([0] * TILE, dt=ti.u32)
-            for dx in ti.static(range(TILE)):
-                vals[dx] = finish_opaque(bgc[y * W + px0 + dx], (1.0 - fy) * ha[dx] + fy * hb[dx], exposure)
-            for dx in ti.static(range(TILE)):
-                out[y * W + px0 + dx] = vals[dx]
+            fh = (drawn >> (y - py0)) & 1
+            for dx in range(TILE):
+                low = ti.Vector([(1.0 - fy) * HA[dx, c] + fy * HB[dx, c] for c in ti.static(range(4))])
+                bg = bgc[y * W + px0 + dx]
+                c = ti.Vector([bg[0], bg[1], bg[2]]) * low[3] + ti.Vector([low[0], low[1], low[2]])
+                if fh != 0:
+                    full = acc_layer(lo, accB, ab + y * aw + px0 + dx, shading)
+                    c = c * full[3] + ti.Vector([full[0], full[1], full[2]])
+                r, g, b = tone_rgb(c * exposure)
+                out[y * W + px0 + dx] = r | (g << 8) | (b << 16) | ti.u32(0xFF000000)
 
     @ti.func
     def bg_pixel(bg_packed: ti.template(), k):
@@ -370,14 +384,16 @@ def _build(uses_add: bool, uses_alpha: bool):
                                     mask = edge_rows[t * TILE + y - py0]
                                 if edge == 0 and mode == 0 and px1 - px0 == TILE - 1 and near != 0:
                                     # the rows that read the same two reduced rows (k of them, fewer at
-                                    # the tile's edges) drawn at once, where none takes the full layer
-                                    # and the two rows are not both empty
+                                    # the tile's edges) drawn at once (``reduced_rows``), unless the two
+                                    # rows are both empty and no sprite of the tile drew in them: then
+                                    # each is the packed background, below
                                     y1 = y
                                     while y1 < py1 and lo_row(y1 + 1, k) == j0:
                                         y1 += 1
-                                    if (drawn >> (y - py0)) & ((1 << (y1 - y + 1)) - 1) == 0 and not (
+                                    if (drawn >> (y - py0)) & ((1 << (y1 - y + 1)) - 1) != 0 or not (
                                             dirty[t] == 0 and (empty >> (ja - jt)) & (empty >> (jb - jt)) & 1 != 0):
-                                        reduced_rows(accA, bgc, out, ra, rb, y, y1, px0, W, s, exposure, Wl, k)
+                                        reduced_rows(accA, accB, bgc, out, ra, rb, y, y1, px0, py0, W, s, drawn, ab, aw,
+                                                     exposure, shading, Wl, k)
                                         grouped = y1
                                         continue
                                 if full_here == 0 and near != 0:
