@@ -150,11 +150,12 @@ def empty_rows(lo: ti.template(), j0, j1, px0, px1, LO, Wl, k: ti.template()):
     xb = ti.min((px1 - k // 2) // k + 1, Wl - 1)
     mask = 0
     for j in range(j0, j1 + 1):
-        all_empty = 1
-        for i in range(LO + j * Wl + xa, LO + j * Wl + xb + 1):
+        i, last = LO + j * Wl + xa, LO + j * Wl + xb
+        while i <= last:  # (to the first texel that is not empty: under smoke, the first one)
             if not is_empty_layer(lo[i]):
-                all_empty = 0
-        mask |= all_empty << (j - j0)
+                break
+            i += 1
+        mask |= ti.select(i > last, 1, 0) << (j - j0)
     return mask
 
 
