@@ -88,13 +88,18 @@ def build_splat(uses_add: bool, uses_alpha: bool, layer):
                 else:  # one inlined pixel in a loop keeps the kernel (and its build) small: a 4×4
                     # unrolled block as well cost 5.6 s more to compile cold, for 1M-particle frames
                     for yy in range(y0, y1 + 1):
-                        # only the row's span inside the circle (a box wastes 1 − π/4 of its pixels)
+                        # the row's span inside the circle marks the row drawn; its pixels are the
+                        # box's [x0, x1] (weight 0 outside the circle, which adds nothing: + 0, × 1):
+                        # one trip count for every row of the record, which the branch predictor
+                        # learns, where a span's own (a box wastes 1 − π/4 of its pixels) missed
+                        # at every row's end — flames.toml's splat at 1280×720 3.23 → 3.08 ms,
+                        # explosion 2.83 → 2.67 (best of 21, one process; the same sums)
                         dy = yy + 0.5 - cy
                         half = ti.sqrt(ti.max(0.0, rad * rad - dy * dy))
                         xs0 = ti.max(x0, ti.cast(ti.floor(cx - half), ti.i32))
                         xs1 = ti.min(x1, ti.cast(ti.floor(cx + half), ti.i32))
                         rows |= ti.select(xs0 <= xs1, 1 << (yy - py0), 0)
-                        for xx in range(xs0, xs1 + 1):
+                        for xx in range(x0, x1 + 1):
                             pixel(xx, yy, True, cx, cy, inv_r2, rec, col, a, is_add, energy, accA,
                                   accB, dep, base, W, ab, aw)
         return rows
