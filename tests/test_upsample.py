@@ -59,7 +59,7 @@ def _rows_along_x(layer, W, s):
 def test_the_composite_reads_the_reduced_rows_as_the_bilinear_upsample(k):
     """What the CPU's composite reads of a reduced row at each full-resolution column: per pixel
     (``row_lerp``) and a whole tile row at once (``row_place``'s texels and fractions, as
-    ``reduced_row`` unrolls them) equal the bilinear upsample's x half bit for bit, and equal each
+    ``reduced_row`` and ``reduced_rows`` take them) equal the bilinear upsample's x half bit for bit, and equal each
     other, at both scales and at a width that cuts the last tile short; ``empty_rows`` marks
     exactly the rows whose texels read for a tile's columns are all the empty layer (runs set
     empty in the middle and at the right edge, one texel there made not quite empty)."""

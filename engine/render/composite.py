@@ -313,8 +313,10 @@ def _build(uses_add: bool, uses_alpha: bool):
         (``Renderer.warm_levels`` compiles both for a loading screen).
 
         The reduced layer (scale s = 1/k, k = 2 or 4) is read from its texels in ``accA``: each
-        pixel row's two reduced rows interpolated along x (``upsample.row_lerp``; a whole row of
-        a tile loads its TILE/k + 2 texels of each once, ``reduced_row``), then between them.
+        pixel row's two reduced rows interpolated along x (``upsample.row_lerp``; in the usual
+        opaque mode, a whole tile's rows that read the same two reduced rows take those lerps
+        once, ``reduced_rows``, or, in a tile with bilateral pixels, a row its TILE/k + 2 texels
+        of each, ``reduced_row``), then between them.
         Before, a kernel of its own wrote every needed row interpolated at every full-resolution
         column (``lo_rows``, 3.7 MB at 1280×720) for the composite to read back: explosion.toml
         at 1280×720, both kernels 6.1 → 4.6 ms, campfire 5.2 → 3.9 (one process, old and new in
