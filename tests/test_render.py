@@ -186,7 +186,7 @@ def test_tone_map_table_samples_aces_and_srgb():
     tile [2^-17, 8) edge to edge, each entry lies between the closed form at its bin's two edges
     (the curve rises), and read as the kernels read it (by a value's bits) it gives the closed
     form's own value for all but a few tenths of a percent of values."""
-    from engine.render.composite import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, tonemap, tonemap_bins, tonemap_table
+    from engine.render.tonemap import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, tonemap, tonemap_bins, tonemap_table
 
     table, (lo, hi) = tonemap_table(), tonemap_bins()
     assert lo[0] == 2.0 ** -17 and hi[-1] == 8.0 and np.all(np.diff(lo) > 0)
@@ -210,7 +210,8 @@ def test_the_kernels_tone_map_by_the_table():
     the table's two ends exactly, and alpha 255."""
     import taichi as ti
 
-    from engine.render.composite import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, build_composite_kernels, tonemap_table
+    from engine.render.composite import build_composite_kernels
+    from engine.render.tonemap import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, tonemap_table
 
     k = build_composite_kernels(True, True)
     rng = np.random.default_rng(11)
