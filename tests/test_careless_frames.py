@@ -87,6 +87,48 @@ def test_a_burst_does_not_starve_the_stream_while_the_segment_has_free_slots():
     s.close()
 
 
+def test_a_birth_whose_ring_slot_is_alive_takes_the_next_free_slot_on_from_the_last_search():
+    """Next fit: a birth whose ring slot is alive takes the first free slot at or after where its
+    emitter's last such search ended, round the segment (not the first in slot order: searched
+    from the segment's start each time, an exactly full ring walked its whole segment every step),
+    and is dropped only when a whole lap finds none. A 16-slot segment filled by a burst, slots
+    freed by hand, then bursts of one."""
+    import numpy as np
+
+    from engine.api import SceneBuilder
+
+    s = (SceneBuilder(fps=60, seed=1).render(width=32, height=32)
+         .emitter(name="e", rate=0.0, emitting=False, lifetime=10.0, speed=(0.0, 0.1), capacity=16)
+         .build(render=False))
+    S, em = s.scene.particles.state, s.scene.particles.emitters
+    assert s.scene.particles.layout.sizes == [16]
+
+    def alive():
+        return S.particle_alive.to_numpy()[:16]
+
+    def free(*slots):
+        a = S.particle_alive.to_numpy()
+        a[list(slots)] = 0
+        S.particle_alive.from_numpy(a)
+
+    s.burst("e", 16)
+    s.step(1 / 60)
+    assert alive().sum() == 16 and s.dropped() == 0  # the ring's head is back at slot 0
+    free(3, 10)
+    s.burst("e", 1)  # ring slot 0 alive: the search starts at the segment's start
+    s.step(1 / 60)
+    assert alive()[3] == 1 and alive()[10] == 0
+    free(2)  # below where that search ended (slot 4)
+    s.burst("e", 1)  # ring slot 1 alive: on from slot 4, not back to the free slot 2
+    s.step(1 / 60)
+    assert alive()[10] == 1 and alive()[2] == 0
+    s.burst("e", 2)  # ring slot 2 free (taken at once); slot 3's birth searches on from 11, round
+    s.step(1 / 60)
+    assert np.all(alive() == 1) and s.dropped() == 1  # a whole lap found no free slot
+    assert int(em.emitted_counts()[0]) == 16 + 1 + 1 + 1
+    s.close()
+
+
 def _children():
     from engine.api import SceneBuilder
 

@@ -95,8 +95,9 @@ class Emitters:
         self.emitter_head, self.emitter_serial = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
         self.emitter_emitted, self.dropped = ti.field(ti.i32, shape=R), ti.field(ti.i32, shape=R)
         self.emitter_moved = ti.field(ti.i32, shape=R)  # births of a launch whose ring slot was alive
+        self.emitter_fit = ti.field(ti.i32, shape=R)  # where the free-slot search goes on (spawn: next fit)
         self._counters = ColumnWriter([self.emitter_head, self.emitter_serial, self.emitter_emitted, self.dropped,
-                                       self.emitter_moved], ti.i32, writes)
+                                       self.emitter_moved, self.emitter_fit], ti.i32, writes)
         with writes.held():
             self.set_configs(configs)
             if R:

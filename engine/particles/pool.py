@@ -7,7 +7,8 @@ once), and the fields are allocated once.
 Why rings: emitter e owns slots [start_e, start_e + size_e) and writes new particles at its ring
 head. A segment of at least rate × max lifetime slots guarantees that a slot is dead when the head
 comes back to it; when it is not (a user-set capacity, a burst of long-lived particles), the
-new particle takes the first free slot of the segment (:func:`engine.particles.spawn.spawn`), and
+new particle takes the next free slot of the segment, from where the last such search ended
+(next fit: :func:`engine.particles.spawn.spawn`), and
 only when the segment is full is it dropped and counted — never silently overwritten. Allocation is deterministic (no atomics decide
 slots) and needs no Python per-particle loop.
 """
