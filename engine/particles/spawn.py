@@ -107,6 +107,30 @@ def _row_of(rows: ti.template(), nrows, q):
     return r
 
 
+@ti.func
+def _next_free(S: ti.template(), start, size, cursor, seen):
+    """Next fit in the segment [start, start + size): the first free slot at or after offset
+    ``cursor``, round the segment, having looked at ``seen`` slots since the search began (a
+    lap at most). Returns (the slot, marked alive; −1 when a whole lap found none, the
+    segment full), and the cursor and count to go on from."""
+    if cursor >= size:  # (a segment shrunk since the last search)
+        cursor = 0
+    while seen < size and S.particle_alive[start + cursor] != 0:
+        cursor += 1
+        seen += 1
+        if cursor == size:
+            cursor = 0
+    slot = -1
+    if seen < size:
+        slot = start + cursor
+        S.particle_alive[slot] = 1
+        cursor += 1
+        seen += 1
+        if cursor == size:
+            cursor = 0
+    return slot, cursor, seen
+
+
 @ti.kernel
 def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i32, ndim=2),
           vals: ti.types.ndarray(dtype=ti.f32, ndim=2), nrows: ti.i32, total: ti.i32,
@@ -156,24 +180,11 @@ def spawn(E: ti.template(), S: ti.template(), rows: ti.types.ndarray(dtype=ti.i3
             for r in range(nrows):
                 if rows[r, R_E] == e:
                     start, size = rows[r, R_START], rows[r, R_SIZE]
-                    if cursor >= size:
-                        cursor = 0
                     for j in range(rows[r, R_K]):
                         q = rows[r, R_FIRST] + j
                         if slots[q] < 0:
-                            while seen < size and S.particle_alive[start + cursor] != 0:
-                                cursor += 1
-                                seen += 1
-                                if cursor == size:
-                                    cursor = 0
-                            if seen < size:
-                                slots[q] = start + cursor
-                                S.particle_alive[start + cursor] = 1
-                                cursor += 1
-                                seen += 1
-                                if cursor == size:
-                                    cursor = 0
-                            else:
+                            slots[q], cursor, seen = _next_free(S, start, size, cursor, seen)
+                            if slots[q] < 0:
                                 E.dropped[e] += 1  # the segment is full
             E.emitter_fit[e] = cursor
     ti.loop_config(serialize=serial)
@@ -240,8 +251,9 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
     rank) and walks its parents in slot order; the n-th child of the pass takes ring slot
     head + n and serial serial + n. A child that would wrap onto a slot this pass already gave
     out (n ≥ ring size) is counted dropped; one that finds its ring slot alive, after the pass,
-    takes the first free slot of the child segment in slot order (one thread walks them in n
-    order: deterministic), or is counted dropped when the segment is full. As in ``spawn``, the slots are chosen first
+    takes the next free slot of the child segment on from where the last search ended (next
+    fit, ``_next_free``: one thread walks them in n order, deterministic), or is counted dropped
+    when a whole lap finds none. As in ``spawn``, the slots are chosen first
     (``parent[n]``: the parent slot of child n; ``slots[n]``: its slot, −1 none; a slot taken is
     marked alive at once) and every child is written after, from one call site.
 
@@ -282,17 +294,13 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
     for _ in range(1):  # one thread: the moved children in n order
         if E.emitter_moved[c] > 0:
             E.emitter_moved[c] = 0
-            cursor = 0
+            cursor, seen = E.emitter_fit[c], 0  # (next fit, as ``spawn``'s births)
             for n in range(born):
                 if slots[n] < 0:
-                    while cursor < c_size and S.particle_alive[c_start + cursor] != 0:
-                        cursor += 1
-                    if cursor < c_size:
-                        slots[n] = c_start + cursor
-                        S.particle_alive[c_start + cursor] = 1
-                        cursor += 1
-                    else:
+                    slots[n], cursor, seen = _next_free(S, c_start, c_size, cursor, seen)
+                    if slots[n] < 0:
                         E.dropped[c] += 1  # the segment is full
+            E.emitter_fit[c] = cursor
     ti.loop_config(serialize=serial)
     for n in range(born):
         if slots[n] >= 0:
