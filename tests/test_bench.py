@@ -76,3 +76,27 @@ def test_quick_bench_slow_section(section):
     if section == "api":
         share = [r.extra["checks_share"] for r in rows if "checks_share" in r.extra]
         assert len(share) == 1 and 0 < share[0] < 1
+
+
+def test_the_block_wise_limit_reads_and_writes_every_slot_of_every_field():
+    """``stream_rmw_blocks`` (the step section's limit over a blocked pool's own fields) turns
+    every value v of the four fields into a·v + b, in every lane of every block: a field, a
+    component or a lane it skipped keeps its value."""
+    import numpy as np
+
+    from engine.particles.pool import BLOCKED_FROM, LANES, ParticleState, lanes_of
+    from particles_tools.bench import kernels
+
+    S = ParticleState(BLOCKED_FROM + 3, adaptive=False)
+    assert S.blocked
+    n = lanes_of(S.capacity)
+    rng = np.random.default_rng(3)
+    before = {"particle_pos": rng.normal(size=(n, 3)), "particle_vel": rng.normal(size=(n, 3)),
+              "particle_age": rng.normal(size=n), "particle_life": rng.normal(size=n)}
+    for name, a in before.items():
+        getattr(S, name).from_numpy(a.astype(np.float32))
+    kernels.stream_rmw_blocks(S.particle_pos, S.particle_vel, S.particle_age, S.particle_life,
+                              2.0, 0.5, n // LANES)
+    for name, a in before.items():
+        want = (2.0 * a.astype(np.float32) + 0.5).astype(np.float32)
+        np.testing.assert_allclose(getattr(S, name).to_numpy(), want, rtol=1e-6, err_msg=name)

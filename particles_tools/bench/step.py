@@ -3,8 +3,9 @@
 * the engine's own: a Scene built from a config, advanced by one fixed substep — the fused
   ``ParticleIntegrator.step_fixed`` kernel plus the emitter's respawn into its ring;
 * a careful in-place NumPy version of the same equations (struct-of-arrays, preallocated, ``out=``);
-* a STREAM-like read-modify-write of the same 32-byte state (the bandwidth limit: the faster of
-  one over the engine's own fields and one over rows of 32 bytes, whole-row vector loads).
+* a STREAM-like read-modify-write of the same 32-byte state (the bandwidth limit: the fastest of
+  those over the engine's own fields, slot by slot and, for a pool kept in blocks, block by
+  block, and one over rows of 32 bytes, whole-row vector loads).
 
 The pool is pre-filled in a steady state: every slot alive, ages spread so that slots die in ring
 order at the emitter's rate, so each step retires and respawns rate × h particles.
@@ -112,16 +113,21 @@ def measure(n: int, repeats: int):
     import taichi as ti
 
     rows = ti.Vector.field(8, ti.f32, shape=n)  # (the same bytes as the particles' state)
-    t = time_interleaved({
+    fns = {
         "engine": lambda: scene.advance(H),
         "kernel": lambda: integrate.step_fixed(P.integrator, scene.t, H),
         "numpy": npst.step,
         "bandwidth": lambda: kernels.stream_rmw(S.particle_pos, S.particle_vel, S.particle_age,
                                                 S.particle_life, 1.0, 0.0),
-        "bandwidth_rows": lambda: kernels.stream_rmw_rows(rows, 1.0, 0.0)}, repeats)
+        "bandwidth_rows": lambda: kernels.stream_rmw_rows(rows, 1.0, 0.0)}
+    if S.blocked:  # (the pool's own layout walked as the step walks it)
+        fns["bandwidth_blocks"] = lambda: kernels.stream_rmw_blocks(
+            S.particle_pos, S.particle_vel, S.particle_age, S.particle_life, 1.0, 0.0, P.integrator.blocks)
+    t = time_interleaved(fns, repeats)
     alive = P.count_alive()
-    # the limit: the faster of the two read-modify-writes (kernels.stream_rmw_rows)
-    return t["engine"], t["kernel"], t["numpy"], min(t["bandwidth"], t["bandwidth_rows"]), alive
+    # the limit: the fastest of the read-modify-writes (kernels.stream_rmw_rows)
+    limit = min(v for k, v in t.items() if k.startswith("bandwidth"))
+    return t["engine"], t["kernel"], t["numpy"], limit, alive
 
 
 def run(quick: bool = False):
