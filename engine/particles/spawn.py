@@ -237,7 +237,6 @@ def _child(E: ti.template(), S: ti.template(), i, c, sid, slot, bit):
     """Child ``sid`` of emitter c from parent slot i, into ``slot``. A collision's children are
     born where and when the impact was located: at the point on the surface, then moved along
     their velocity for the time left in the step (the age they start with)."""
-    ti.atomic_add(E.emitter_emitted[c], 1)
     centre = S.particle_pos[i]
     if bit == EVENT_COLLISION:
         centre = S.particle_impact_pos[i]
@@ -300,6 +299,7 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
     born = ti.min(total * count, c_size)
     ti.loop_config(serialize=serial)
     for _ in range(1):  # one thread: the moved children in n order
+        placed = born  # (counted here, as ``spawn``'s births: not an atomic add per child)
         if E.emitter_moved[c] > 0:
             E.emitter_moved[c] = 0
             cursor, seen = E.emitter_fit[c], 0  # (next fit, as ``spawn``'s births)
@@ -308,7 +308,9 @@ def spawn_children(E: ti.template(), S: ti.template(), counts: ti.template(), pa
                     slots[n], cursor, seen = _next_free(S, c_start, c_size, cursor, seen)
                     if slots[n] < 0:
                         E.dropped[c] += 1  # the segment is full
+                        placed -= 1
             E.emitter_fit[c] = cursor
+        E.emitter_emitted[c] += placed
     ti.loop_config(serialize=serial)
     for n in range(born):
         if slots[n] >= 0:
