@@ -27,11 +27,11 @@ with its ``tile_rows``).
 
 Tone map: exposure, the ACES filmic fit (Narkowicz 2015), sRGB by a 20,480-entry table of 8-bit
 values (``pow`` once per entry at build, not three times per pixel), found by the value's bits
-(``engine.render.tonemap``), packed as one u32 RGBA per pixel (bytes R, G, B, A in memory).
+(``engine.render.tonemap``), packed as one u32 RGBA per pixel (bytes R, G, B, A in memory):
+``engine.render.pack``, built here with the kernels.
 """
 # (no `from __future__ import annotations`: Taichi reads kernel annotations at definition)
 
-import numpy as np
 import taichi as ti
 
 from .. import runtime
@@ -39,7 +39,7 @@ from ..launch import fast
 from ..spread import TASK, item, rounds, tasks
 from .splat_kernels import EMPTY_LAYER, ND_PAIRS, build_splat
 from .sprites import TILE
-from .tonemap import LUT_BIAS, LUT_BITS, LUT_HI, LUT_LO, LUT_SIZE, tonemap_table
+from .pack import build_pack
 from .upsample import (ND_F, ND_I1, ND_V4, bilateral_mix, empty_rows, lo_bilateral, lo_edge, lo_near, lo_row,
                        lo_rows, lo_sample, row_place, rows_lerp, tile_edge_rows)
 
@@ -68,41 +68,8 @@ runtime.on_reset(_BUILT.clear)
 
 
 def _build(uses_add: bool, uses_alpha: bool):
-    # one byte an entry: the 20 KB table stays in L1 (as i32, 64 KB, a table of 16,384 entries
-    # did not: the composite of debris.toml at 1280×720, 81 % of its tiles reduced-layer-only,
-    # 12.4 → 6.8 ms)
-    lut = ti.field(ti.u8, shape=LUT_SIZE)
-    llvm = runtime._arch_in_use() in ("cpu", "cuda")  # (LLVM's max returns the operand not NaN)
-    lut.from_numpy(tonemap_table().astype(np.uint8))
+    tone_rgb, finish, finish_opaque = build_pack()
     NT = tasks()  # (the per-tile loop's tasks: engine.spread)
-
-    @ti.func
-    def tone(x):
-        """One channel's 8-bit value: its table bin by its bits (``tonemap_table``)."""
-        i = ti.cast(ti.bit_cast(x, ti.u32) >> (23 - LUT_BITS), ti.i32) - LUT_BIAS
-        if ti.static(not llvm):  # a NaN past the clamp (a max that may return it) still in the table
-            i = ti.min(i, LUT_SIZE - 1)  # (on CPU and CUDA it cannot bind: 3–8 % of the composite)
-        return ti.cast(lut[i], ti.u32)
-
-    @ti.func
-    def tone_rgb(c):
-        """Linear RGB (exposure applied) → ACES → sRGB: its three 8-bit values, by table."""
-        # (ti.math.clamp's own min(max) written out: it is a ti.func, parsed and transformed at
-        # each of its ~20 call sites in the composite, at every start. A NaN takes the lower
-        # bound, black, as before, on the LLVM backends (CPU, CUDA): their max returns the operand
-        # that is not NaN)
-        v = ti.min(LUT_HI, ti.max(LUT_LO, c))
-        return tone(v[0]), tone(v[1]), tone(v[2])
-
-    @ti.func
-    def pack(c, alpha, bgra):
-        """``tone_rgb(c)`` with alpha, as one u32: bytes R, G, B, A in memory (``bgra`` 0) or
-        B, G, R, A (windowing systems' order)."""
-        r, g, b = tone_rgb(c)
-        a = ti.cast(ti.min(255.0, alpha * 255.0 + 0.5), ti.u32)
-        if bgra != 0:
-            r, b = b, r
-        return r | (g << 8) | (b << 16) | (a << 24)
 
     @ti.func
     def layer(A, B, shading):
@@ -117,33 +84,6 @@ def _build(uses_add: bool, uses_alpha: bool):
                 shade = 0.25 + 0.75 * ti.pow(ti.max(T, 1e-30), shading)
                 c += ti.Vector([B[0], B[1], B[2]]) * (shade * (1.0 - T) / B[3])
         return ti.Vector([c[0], c[1], c[2], T])
-
-    @ti.func
-    def finish(bg, lo, full, exposure, mode):
-        """bg (RGB, coverage), then the reduced layer over it, then the full-resolution layer:
-        c = (bg·T_lo + rgb_lo)·T + rgb. Coverage is 1 for soft bodies; the background itself has 0
-        and is left out of a transparent render (``mode`` bit 0; premultiplied, alpha =
-        1 − (1 − cover)·T_lo·T). ``mode`` bit 1: BGRA byte order."""
-        c = ti.Vector([bg[0], bg[1], bg[2]])
-        cover = 1.0
-        if mode & 1:
-            c = c * bg[3]
-            cover = bg[3]
-        c = c * lo[3] + ti.Vector([lo[0], lo[1], lo[2]])
-        c = c * full[3] + ti.Vector([full[0], full[1], full[2]])
-        return pack(c * exposure, 1.0 - (1.0 - cover) * lo[3] * full[3], mode & 2)
-
-    @ti.func
-    def finish_opaque(bg, lo, exposure):
-        """``finish(bg, lo, EMPTY_LAYER, exposure, 0)``, the same bytes, with its alpha a constant:
-        opaque RGBA (mode 0) has alpha 1 − 0·T_lo = 1, byte 255, for any T_lo (a NaN one too: the
-        min takes 255), but the compiler may not fold 0·x without knowing x finite, so ``finish``
-        computes, clamps and converts it at every pixel. The unrolled reduced rows take this
-        one: their composite 4.34 → 3.94 ms in flames.toml at 1280×720 (old and new kernels in one
-        process, alternating; 7 % by the median of paired rounds)."""
-        c = ti.Vector([bg[0], bg[1], bg[2]]) * lo[3] + ti.Vector([lo[0], lo[1], lo[2]])
-        r, g, b = tone_rgb(c * exposure)
-        return r | (g << 8) | (b << 16) | ti.u32(0xFF000000)
 
     @ti.func
     def acc_layer(accA: ti.template(), accB: ti.template(), k, shading):

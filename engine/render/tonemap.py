@@ -1,6 +1,6 @@
 """The tone map's closed form and its table (NumPy; no Taichi): exposure-scaled linear RGB → the
 ACES filmic fit (Narkowicz 2015) → 8-bit sRGB (IEC 61966-2-1), sampled into a table of
-``LUT_SIZE`` bins found by a float's bits. ``engine.render.composite`` uploads the table once per
+``LUT_SIZE`` bins found by a float's bits. ``engine.render.pack`` uploads the table once per
 Taichi program and looks each channel up by its bits (its ``tone``)."""
 from __future__ import annotations
 
