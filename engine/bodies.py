@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from .collider_view import ColliderView
 from .colliders import Colliders
 from .forces.terms import lame
 from .paths import Path, sample_path
@@ -71,7 +72,7 @@ def _spring_topology(b):
 
 class SoftBody(SystemBase):
     """One soft body of a scene: its spring system, the scene's shape table seen through its
-    thickness (a :class:`~engine.colliders.ColliderView`: an offset, not a copy) and what the
+    thickness (a :class:`~engine.collider_view.ColliderView`: an offset, not a copy) and what the
     renderer draws."""
 
     def __init__(self, cfg, colliders, control, default_integrator, index: int = 0, contacts: int = 0,
@@ -93,7 +94,7 @@ class SoftBody(SystemBase):
         # sphere would otherwise cut into it (a chord lies inside the circle)
         if colliders is not None and not isinstance(colliders, Colliders):
             colliders = Colliders(list(colliders)) if len(colliders) else None
-        self.colliders = colliders.view(cfg.thickness) if colliders is not None and colliders.count else None
+        self.colliders = ColliderView(colliders, cfg.thickness) if colliders is not None and colliders.count else None
         integrator = cfg.integrator or default_integrator
         self.system = SpringSystem(self.topology, colliders=self.colliders, control=control,
                                    integrator=integrator, substeps=cfg.substeps,

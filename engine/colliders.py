@@ -24,7 +24,7 @@ particle lying on the ground is held there, not bounced and re-detected at every
 of a bouncing ball's Zeno series).
 
 One table per scene: the particles read it as it is; a soft body reads it through a
-:class:`ColliderView` whose compile-time ``offset`` (the body's thickness) is subtracted from every
+:class:`~engine.collider_view.ColliderView` whose compile-time ``offset`` (the body's thickness) is subtracted from every
 signed distance — its nodes keep that distance from every surface — sharing the table's fields,
 so a moving shape is written once. The set of shapes is fixed when a scene is finalised: their
 count, kinds and whether each spins are compile-time constants and the per-shape loop is unrolled
@@ -60,7 +60,7 @@ from .geometry.shapes import (BOX, CAPSULE, KINDS, PLANE, SPHERE, box_local, qua
 from .launch import data_oriented
 from .ode.events import contact_band
 
-__all__ = ["ColliderSpec", "Colliders", "ColliderView", "PLANE", "SPHERE", "BOX", "CAPSULE", "KINDS", "OWNERS"]
+__all__ = ["ColliderSpec", "Colliders", "PLANE", "SPHERE", "BOX", "CAPSULE", "KINDS", "OWNERS"]
 OWNERS = ("collider", "rigid")  # who a shape belongs to: a config's collider, or a rigid body's shape
 
 
@@ -129,7 +129,7 @@ class Colliders(ShapePoses, ProjectedShapes):
     is ``collider_normal``) and
     ``collider_omega`` (rad/s: spinning shapes). ``count``, ``kinds``, ``spins``, ``kills`` and
     ``offset`` (m, subtracted from every signed distance: 0 here, a soft body's thickness in a
-    :class:`ColliderView`) are compile-time constants of the kernels.
+    :class:`~engine.collider_view.ColliderView`) are compile-time constants of the kernels.
     """
 
     offset = 0.0
@@ -225,11 +225,6 @@ class Colliders(ShapePoses, ProjectedShapes):
                 return k
         raise KeyError(f"collider: no collider named {name!r} "
                        f"(names: {', '.join(repr(s.name) for s in self.specs if s.name) or 'none'})")
-
-    def view(self, offset: float = 0.0, kill: bool = False) -> "ColliderView":
-        """This table as seen by points that keep ``offset`` m from every surface (a soft body's
-        thickness); ``kill`` False: touching a ``kill`` shape does not end their motion."""
-        return ColliderView(self, offset, kill)
 
     # -- the event set (engine.ode.events) ---------------------------------------------------------
     def linear(self, k: int) -> bool:
@@ -408,46 +403,3 @@ class Colliders(ShapePoses, ProjectedShapes):
             x, v, hits, which, n_hit, speed = self.project_projected(x, v, x0, v0, h, i, hits, which, n_hit, speed)
         return x, v, hits, killed, which, n_hit, speed
 
-
-_SHARED = ("specs", "count", "event_count", "dtype", "kinds", "spins", "rotating", "names", "owners", "parties", "collider_point",
-           "collider_normal", "collider_radius", "collider_vel", "collider_restitution", "collider_friction",
-           "collider_half", "collider_axis_x", "collider_axis_z", "collider_omega", "collider_kind", "collider_bound",
-           "_band", "_np")
-
-
-@data_oriented
-class ColliderView(Colliders):
-    """A :class:`Colliders` table as points that keep ``offset`` m from its surfaces meet it (a
-    soft body's nodes, ``offset`` its thickness: a sphere grows by it, a plane moves out along
-    its normal, a box rounds its edges by it): the table's own fields (nothing copied: a shape
-    placed in the table is placed for every view of it), a compile-time ``offset``, and
-    ``kills`` off unless ``kill`` (a ``kill`` shape ends particles, not soft bodies). Placing
-    through a view places the table."""
-
-    def __init__(self, table: Colliders, offset: float = 0.0, kill: bool = False):
-        self.table = table
-        for name in _SHARED:
-            if hasattr(table, name):
-                setattr(self, name, getattr(table, name))
-        self.offset = float(offset)
-        if not float(offset) >= 0.0:
-            raise ValueError(f"offset: must be >= 0 m, got {offset}")
-        self.kills = table.kills if kill else tuple(False for _ in table.kills)
-
-    def move_to(self, *args, **kw) -> None:
-        self.table.move_to(*args, **kw)
-
-    def follow(self, control, t0: float, t1: float) -> bool:
-        return self.table.follow(control, t0, t1)
-
-    def reset(self) -> None:
-        self.table.reset()
-
-    def pose(self, k: int) -> dict:
-        return self.table.pose(k)
-
-    def shown_bounds(self) -> list:
-        return self.table.shown_bounds()
-
-    def poses_over(self, control, steps) -> np.ndarray:
-        return self.table.poses_over(control, steps)

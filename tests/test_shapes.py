@@ -102,6 +102,7 @@ def test_projected_shapes_match_the_reference_for_moving_spinning_bodies():
     # a rigid body's box or capsule sits at the table's end, met by a run-time loop
     # (Colliders.projected_contact): its (g, N) at `lag` before the step's end equal the
     # reference's for the pose there (p − v·lag, turned by −ω·lag), with and without an offset
+    from engine.collider_view import ColliderView
     from engine.colliders import ColliderSpec, Colliders
     q = quat_from_rotvec([-0.4, 0.2, 0.6])
     specs = [ColliderSpec("plane", point=(0, -2, 0)),
@@ -116,7 +117,7 @@ def test_projected_shapes_match_the_reference_for_moving_spinning_bodies():
     p1 = np.array([s.point for s in specs], np.float64) + vel * h
     q1 = [spun(s.orientation, omega, h) for s in specs]
     c.move_to(h, p1, since=(0.0, p1 - vel * h), orientations=q1, omegas=[[0, 0, 0], omega, omega])
-    view = c.view(d)
+    view = ColliderView(c, d)
     n, lag = 4000, 0.037
     X = ti.Vector.field(3, ti.f64, n)
     Gf = ti.field(ti.f64, (2, 2, n))
