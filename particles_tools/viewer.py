@@ -52,6 +52,34 @@ class Orbit:
         self.apply()
 
 
+def _open_window(ti, scene, title: str, W: int, H: int):
+    """The window, or one line naming the display when none opens there (a DISPLAY set to a
+    server that is gone or will not take us): Taichi logs its own error line, writes blank lines
+    to the process's stdout and raises with a traceback, so for the call its log is quiet and
+    file descriptor 1 points at /dev/null, and the scene is closed before the message."""
+    from taichi import _logging
+
+    levels = (ti.TRACE, ti.DEBUG, ti.INFO, ti.WARN, ti.ERROR, ti.CRITICAL)
+    before = next((lv for lv in levels if _logging.is_logging_effective(lv)), ti.WARN)
+    ti.set_logging_level(ti.CRITICAL)
+    sys.stdout.flush()
+    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    try:
+        return ti.GUI(title, res=(W, H), fast_gui=True, show_gui=True)
+    except RuntimeError:
+        scene.close()
+        where = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+        raise UserError(f"view: cannot open a window on display {where!r} (no X server there accepts "
+                        "one): check DISPLAY, or run under Xvfb (xvfb-run particles view ...); "
+                        "`particles run` renders frames off-screen") from None
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+        ti.set_logging_level(before)
+
+
 def run_viewer(make_scene, title: str, frames: int | None = None, screenshot: str | None = None,
                on_frame=None, size=None, drive: bool = True) -> dict:
     """Open a window and play ``make_scene()`` (a ParticleScene) in real time. ``on_frame(scene,
@@ -68,7 +96,7 @@ def run_viewer(make_scene, title: str, frames: int | None = None, screenshot: st
     W, H = size or (scene.cfg.render.width, scene.cfg.render.height)
     # fast GUI: the window shows a packed 0x00RRGGBB buffer, top row first — the renderer's BGRA
     # output byte for byte, so frames are drawn straight into it (no conversion, no copy)
-    gui = ti.GUI(title, res=(W, H), fast_gui=True, show_gui=True)
+    gui = _open_window(ti, scene, title, W, H)
     frame = gui.img.view(np.uint8).reshape(H, W, 4)
     orbit = Orbit(scene.scene.camera)
     clock = FixedTimestep(scene.scene.frame_dt, max_steps=4)

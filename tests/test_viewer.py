@@ -1,5 +1,6 @@
 """The live viewer in a real window on a virtual X screen (Xvfb), and its no-display message."""
 import os
+import select
 import shutil
 import subprocess
 import sys
@@ -19,15 +20,24 @@ def xdisplay():
         if os.environ.get("CI"):
             pytest.fail("Xvfb is missing: .ci/run installs it (Debian package xvfb)")
         pytest.skip("Xvfb not installed (apt-get install xvfb x11-apps)")
-    num = 140 + os.getpid() % 50
-    proc = subprocess.Popen([xvfb, f":{num}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    sock = f"/tmp/.X11-unix/X{num}"
-    for _ in range(100):
-        if os.path.exists(sock):
-            break
-        time.sleep(0.05)
-    yield f":{num}"
+    # -displayfd: the server takes a free display and writes its number once it accepts
+    # clients (a socket file that exists is not yet a server that answers)
+    r, w = os.pipe()
+    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(w)
+    got, deadline = b"", time.monotonic() + 30
+    while not got.endswith(b"\n") and time.monotonic() < deadline:
+        if select.select([r], [], [], 0.5)[0]:
+            chunk = os.read(r, 16)
+            if not chunk:
+                break  # the server ended before it was ready
+            got += chunk
+    os.close(r)
+    if not got.endswith(b"\n"):
+        proc.kill()
+        pytest.fail(f"Xvfb did not start (exit {proc.wait(timeout=10)})")
+    yield f":{int(got)}"
     proc.terminate()
     proc.wait(timeout=10)
 
@@ -64,6 +74,20 @@ def test_viewer_says_clearly_when_there_is_no_display():
     r = subprocess.run([sys.executable, "-m", "engine", "view", "configs/sparks.toml"], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "no display" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_viewer_says_clearly_when_no_server_answers_on_the_display():
+    """DISPLAY set, but no X server there (one that went away): one line naming the display,
+    exit 2, nothing on stdout, no traceback (Taichi's own error log and blank lines held back)."""
+    num = next(n for n in range(900, 1000) if not os.path.exists(f"/tmp/.X11-unix/X{n}")
+               and not os.path.exists(f"/tmp/.X{n}-lock"))
+    env = dict({k: v for k, v in ENV.items() if k != "WAYLAND_DISPLAY"}, DISPLAY=f":{num}")
+    r = subprocess.run([sys.executable, "-m", "engine", "view", "configs/sparks.toml"], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=120)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert f"':{num}'" in lines[0] and "cannot open a window" in lines[0]
+    assert "Traceback" not in r.stderr and r.stdout.strip() == ""
 
 
 def test_viewer_refuses_a_bad_config_in_one_line_before_a_window_opens(tmp_path):
