@@ -224,3 +224,32 @@ def test_interpolate_changes_no_byte_where_positions_are_equal():
         assert np.array_equal(b.render(alpha=alpha), a.render()), alpha
     a.close()
     b.close()
+
+
+def test_every_birth_and_child_is_counted_once_emitted_or_dropped():
+    """Per emitter, emitted + dropped = the serial numbers handed out (each birth or child takes
+    one), in a scene where rings wrap onto live particles, segments fill (births and children
+    dropped by the free-slot search) and a burst is bigger than its ring (dropped by the plan)."""
+    from engine.config import load_config
+    from engine.scene import Scene
+
+    d = dict(seed=5, emitters=[
+        {"name": "a", "rate": 3000.0, "lifetime": 0.4, "speed": [1.0, 2.0], "capacity": 600,
+         "bursts": [{"time": 0.2, "count": 700}, {"time": 0.5, "count": 90}]},
+        {"name": "b", "rate": 500.0, "lifetime": 5.0, "speed": [0.1, 0.2], "capacity": 900,
+         "bursts": [{"time": 0.1, "count": 300}]},
+        {"name": "parent", "rate": 400.0, "lifetime": 0.3, "speed": [1.0, 2.0], "capacity": 512,
+         "bursts": [{"time": 0.0, "count": 300}],
+         "sub_emitters": [{"event": "death", "emitter": "child", "count": 5}]},
+        {"name": "child", "rate": 0.0, "lifetime": 0.7, "speed": [0.1, 0.2], "capacity": 700, "spread": 180.0}])
+    s = Scene(load_config(d), render=False)
+    E = s.particles.emitters
+    for _ in range(8):
+        for _ in range(15):
+            s.advance_frame()
+        emitted, dropped = E.emitted_counts(), E.dropped_counts()
+        serial = E.emitter_serial.to_numpy()[:4]
+        assert (emitted + dropped == serial).all(), (emitted, dropped, serial)
+        assert s.live_count() <= emitted.sum()
+    # the plan's drop (a: a burst past its ring), the free-slot search's (b; child) and none (parent)
+    assert dropped[[0, 1, 3]].all() and dropped[2] == 0, dropped
