@@ -100,3 +100,34 @@ def test_the_block_wise_limit_reads_and_writes_every_slot_of_every_field():
     for name, a in before.items():
         want = (2.0 * a.astype(np.float32) + 0.5).astype(np.float32)
         np.testing.assert_allclose(getattr(S, name).to_numpy(), want, rtol=1e-6, err_msg=name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["sparks", "smoke"])
+def test_the_splat_is_timed_as_the_frame_launches_it(name, monkeypatch):
+    """The effects section's splat figure (``splatcost.measure``) launches the per-tile splat
+    as the frame just drawn did: sparks' full level alone by the kernel without the other
+    levels' code, smoke's coarse level first, then the others (it once timed every scene's
+    splat the second way, one launch more, and sparks' kernel was not the one its frames take)."""
+    from engine.api import ParticleScene
+    from engine.render.renderer import Renderer
+    from particles_tools.bench import effects
+
+    scene = ParticleScene.from_file(f"configs/{name}.toml")
+    for _ in range(30):
+        scene.step(1 / 60)
+        scene.render(1280, 720)
+    calls = []
+    real = Renderer.splat_tiles
+    monkeypatch.setattr(Renderer, "splat_tiles",
+                        lambda self, t, dep, lo, hi, levels=True: (calls.append((lo, hi, bool(levels))),
+                                                                    real(self, t, dep, lo, hi, levels))[1])
+    scene.render(1280, 720)
+    frame = list(calls)
+    assert frame and all(hi > lo for lo, hi, _ in frame)
+    assert frame[0][2] is (name != "sparks"), frame  # (the two paths are the ones each takes)
+    del calls[:]
+    n, t_splat, t_ref = effects.splat_cost(scene, 1280, 720)
+    assert n > 0 and t_splat > 0 and t_ref > 0
+    assert calls and len(calls) % len(frame) == 0
+    assert calls == frame * (len(calls) // len(frame)), (frame, calls[:4])

@@ -229,6 +229,19 @@ class Renderer:
                                    t.touched_co, t.full_rows, t_lo, t_hi, t.T0, t.TX, t.W, t.H, t.T1, t.TXl, t.Wl, t.Hl,
                                    t.TXc, t.Wc, t.Hc, self.shading, bool(levels))
 
+    def splat_frame(self, t: FrameTargets, dep, reduced: int) -> None:
+        """The per-tile splat of a frame binned into ``t`` with ``reduced`` pairs at the reduced
+        and coarse levels, launched as the frame takes it (the bench times it so)."""
+        if reduced == 0 and t.lo_clear and not self._all_levels:
+            # nothing at the reduced and coarse levels, now or at the last splat: their tiles
+            # are all clear already, so only the full level's are splatted, by a kernel
+            # without the other levels' code (sparks and galaxy never build it; one parallel
+            # loop less a frame)
+            self.splat_tiles(t, dep, 0, t.T0, levels=False)
+        else:
+            self.splat_tiles(t, dep, t.T0 + t.T1, t.T)  # the coarse level first: the reduced one reads it
+            self.splat_tiles(t, dep, 0, t.T0 + t.T1)
+
     def _splat(self, t: FrameTargets, cam, dep, blend: float = 1.0) -> int:
         """Sprites, binning, and the splat (per tile: both levels; per pixel: the reduced level,
         the full one is splatted in the composite); returns whether the reduced level is used."""
@@ -250,15 +263,7 @@ class Renderer:
             return 0
         self._scatter(t.pairs, t.hist, t.tile_start, t.T0, t.T1, t.TX, t.TXl, t.TXc)
         if self.schedule == "tiles":
-            if reduced == 0 and t.lo_clear and not self._all_levels:
-                # nothing at the reduced and coarse levels, now or at the last splat: their tiles
-                # are all clear already, so only the full level's are splatted, by a kernel
-                # without the other levels' code (sparks and galaxy never build it; one parallel
-                # loop less a frame)
-                self.splat_tiles(t, dep, 0, t.T0, levels=False)
-            else:
-                self.splat_tiles(t, dep, t.T0 + t.T1, t.T)  # the coarse level first: the reduced one reads it
-                self.splat_tiles(t, dep, 0, t.T0 + t.T1)
+            self.splat_frame(t, dep, reduced)
         elif t.has_lo:
             self._k["splat_pixels_co"](t.pairs, t.tile_count, t.tile_start, t.accA, t.accB, dep, t.touched_co,
                                        t.T0 + t.T1, t.LC, t.T2, t.TXc, t.Wc, t.Hc)

@@ -101,9 +101,8 @@ def measure(renderer, t, dep, rounds: int = 7):
     ref = _ref_kernel()
     scratch = ti.ndarray(ti.types.vector(4, ti.f32), shape=t.accA.shape[0])
 
-    def splat():  # (as the renderer launches it: the coarse level first)
-        R.splat_tiles(t, dep, t.T0 + t.T1, t.T)
-        R.splat_tiles(t, dep, 0, t.T0 + t.T1)
+    def splat():  # (as the frame launched it: the full level alone, or the coarse level first)
+        R.splat_frame(t, dep, R.last_reduced_pairs)
 
     def plain():
         ref(idx, start, scratch, t.T)
