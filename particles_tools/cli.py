@@ -211,13 +211,10 @@ def _cmd_chart(args) -> int:
 
 
 def _cmd_profile(args) -> int:
-    from engine.config import ConfigError
+    from .commands import scene_from_file
     from .profile import profile
 
-    try:
-        print(profile(args.config, *args.size, args.frames))
-    except ConfigError as e:
-        raise UserError("\n".join(f"{args.config}: {p}" for p in e.problems)) from None
+    print(profile(args.config, *args.size, args.frames, scene=scene_from_file(args.config)))
     return EXIT_OK
 
 

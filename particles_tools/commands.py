@@ -53,6 +53,20 @@ def load_scene_config(path, args):
         raise UserError("\n".join(f"{path}: {p}" for p in e.problems)) from None
 
 
+def scene_from_file(path):
+    """The game API's scene of the config at ``path`` for the tools that run one as a game does
+    (``view``, ``profile``): the checks and messages of ``particles run`` first (one line per
+    problem, naming the file and the key; a missing file too), then the API's own, one line —
+    a UserError either way, before a window opens or a kernel compiles."""
+    from engine.api import ParticleScene
+
+    load_scene_config(path, None)
+    try:
+        return ParticleScene.from_file(path)
+    except (ConfigError, ValueError) as e:
+        raise UserError(f"{path}: {e}") from None
+
+
 def output_dir(cfg, args) -> str:
     """--out as given, else renders/<output or name>; a config's ``output`` must stay inside
     renders/, also through symbolic links."""

@@ -28,14 +28,16 @@ def _kernel_table():
     return out
 
 
-def profile(path: str, width: int = 1280, height: int = 720, frames: int = 20, warm_seconds=None):
-    """Returns the report as text."""
+def profile(path: str, width: int = 1280, height: int = 720, frames: int = 20, warm_seconds=None,
+            scene=None):
+    """Returns the report as text (``scene``: the config at ``path`` built already)."""
     import numpy as np
     import taichi as ti
 
     from engine.api import ParticleScene
 
-    scene = ParticleScene.from_file(path)
+    if scene is None:
+        scene = ParticleScene.from_file(path)
     cfg = scene.cfg
     dt = 1.0 / 60.0
     warm = min(2.0, 0.5 * cfg.frame_count / cfg.fps) if warm_seconds is None else warm_seconds

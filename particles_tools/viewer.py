@@ -160,20 +160,10 @@ def run_viewer(make_scene, title: str, frames: int | None = None, screenshot: st
 
 
 def cmd_view(args) -> int:
-    from engine.api import ParticleScene
-    from engine.config import ConfigError
-
-    from .commands import load_scene_config
-
-    # the same checks and messages as `particles run` (one line per problem, naming the file and
-    # the key) before a window opens or a kernel compiles
-    load_scene_config(args.config, None)
+    from .commands import scene_from_file
 
     def make():
-        try:
-            return ParticleScene.from_file(args.config)
-        except (ConfigError, ValueError) as e:  # the API's own checks: one line, no traceback
-            raise UserError(f"{args.config}: {e}") from None
+        return scene_from_file(args.config)
 
     make()  # a scene that cannot be built fails before a window opens
     r = run_viewer(make, f"particles: {args.config}", frames=args.frames, screenshot=args.screenshot)

@@ -255,3 +255,16 @@ def test_parser_choices_match_the_engine():
     assert set(cli.PROBLEM_NAMES) == set(PROBLEMS)
     code, _, err = call("--arch", "vulkan", "ode", "decay")  # this process runs on the CPU already
     assert "--arch: " in one_error_line(code, err)
+
+
+@pytest.mark.parametrize("cmd", ["profile", "view"])
+@pytest.mark.parametrize("case", ["missing", "bad value"])
+def test_the_tools_that_play_a_config_check_it_as_run_does(tmp_path, cmd, case):
+    """``profile`` and ``view`` build a config as a game does, through the API; a missing file or
+    a bad value is the one line ``particles run`` gives, exit 2, before any kernel compiles
+    (``profile`` printed the API's traceback, exit 1)."""
+    path = tmp_path / "nope.toml" if case == "missing" else cfg_file(tmp_path, body="fps = 'x'\n")
+    r = particles(cmd, path)
+    line = one_error_line(r.returncode, r.stderr)
+    assert str(path) in line and ("file not found" if case == "missing" else "fps: 'x' is not allowed") in line
+    assert r.stdout == ""
