@@ -194,11 +194,13 @@ def _cmd_schema(args) -> int:
 
 def _cmd_chart(args) -> int:
     from .charts import ChartFailed, run_charts, selection
+    from .commands import output_folder
 
     try:
         which = selection(args.only, key="--only")
     except ValueError as e:
         raise UserError(str(e)) from None
+    output_folder(args.out)
     try:
         paths = run_charts(args.out, quick=args.quick, which=which, quiet=args.quiet)
     except ImportError as e:

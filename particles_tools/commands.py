@@ -53,6 +53,18 @@ def load_scene_config(path, args):
         raise UserError("\n".join(f"{path}: {p}" for p in e.problems)) from None
 
 
+def output_folder(path: str, flag: str = "--out") -> str:
+    """The folder a command writes its files into, created and checked writable: one line
+    naming ``flag`` and exit 4 otherwise, as ``particles run --out`` (``chart``, ``gallery``)."""
+    from engine.render.output import OutputError, writable_dir
+
+    try:
+        writable_dir(path, flag)
+    except OutputError as e:
+        raise OutputFailure(str(e)) from None
+    return path
+
+
 def scene_from_file(path):
     """The game API's scene of the config at ``path`` for the tools that run one as a game does
     (``view``, ``profile``): the checks and messages of ``particles run`` first (one line per

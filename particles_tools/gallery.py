@@ -53,6 +53,7 @@ def render_still(config_path: str, seconds: float, size, out_path: str) -> dict:
 
 
 def cmd_gallery(args) -> int:
+    from .commands import output_folder
     from .errors import UserError
     from .progress import progress
 
@@ -61,7 +62,7 @@ def cmd_gallery(args) -> int:
     shots = [(n, s) for n, s in SHOTS.items() if os.path.exists(os.path.join(args.configs, f"{n}.toml"))]
     if not shots:
         raise UserError(f"--configs: {args.configs!r} holds none of {', '.join(SHOTS)} (.toml)")
-    os.makedirs(args.out, exist_ok=True)
+    output_folder(args.out)
     with progress(len(shots), unit="stills", label="particles gallery",
                   quiet=getattr(args, "quiet", False)) as bar:
         for name, (seconds, size) in shots:

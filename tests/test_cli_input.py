@@ -268,3 +268,16 @@ def test_the_tools_that_play_a_config_check_it_as_run_does(tmp_path, cmd, case):
     line = one_error_line(r.returncode, r.stderr)
     assert str(path) in line and ("file not found" if case == "missing" else "fps: 'x' is not allowed") in line
     assert r.stdout == ""
+
+
+@pytest.mark.parametrize("args", [["chart", "--only", "kepler", "--quick"], ["gallery", "--quiet"]])
+@pytest.mark.parametrize("where", ["a file", "under a file"])
+def test_chart_and_gallery_out_that_cannot_be_a_folder(tmp_path, args, where):
+    """``--out`` a file, or a path through one: one line naming the flag, exit 4 (an output
+    failure, as ``particles run --out``), the file untouched; it was a traceback."""
+    f = tmp_path / "afile"
+    f.write_text("mine")
+    out = f if where == "a file" else f / "sub"
+    r = particles(*args, "--out", out)
+    line = one_error_line(r.returncode, r.stderr, expect_code=4)
+    assert line.startswith("error: --out: ") and str(out) in line and f.read_text() == "mine"

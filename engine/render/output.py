@@ -40,6 +40,22 @@ def existing_outputs(out_dir: str):
                   + glob.glob(os.path.join(out_dir, "*.gif")) + glob.glob(os.path.join(out_dir, "*.mp4")))
 
 
+def writable_dir(out_dir: str, flag: str = "--out") -> None:
+    """Create ``out_dir`` (or check an existing one) and that a file can be written in it;
+    :class:`OutputError` naming ``flag`` otherwise (a file there, a read-only place, a path
+    through a file)."""
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise OutputError(f"{flag}: {out_dir} exists and is not a directory")
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+        probe = os.path.join(out_dir, ".write-probe.tmp")
+        with open(probe, "wb") as fh:
+            fh.write(b"ok")
+        os.remove(probe)
+    except OSError as e:
+        raise OutputError(f"{flag}: cannot write to {out_dir}: {e.strerror or e}") from None
+
+
 def prepare_dir(out_dir: str, overwrite: bool) -> None:
     """Create ``out_dir`` (or check an existing one): refuse to overwrite frames without
     ``overwrite``; with it, remove only the files this engine writes. Checks it is writable."""
@@ -49,16 +65,12 @@ def prepare_dir(out_dir: str, overwrite: bool) -> None:
     if old and not overwrite:
         raise OutputRefused(f"--out: {out_dir} already holds {len(old)} rendered file(s); "
                           f"pass --overwrite to replace them or --out to choose another folder")
+    writable_dir(out_dir)
     try:
-        os.makedirs(out_dir, exist_ok=True)
         for f in old:
             os.remove(f)
         for f in glob.glob(os.path.join(out_dir, ".*.tmp*")):
             os.remove(f)
-        probe = os.path.join(out_dir, ".write-probe.tmp")
-        with open(probe, "wb") as fh:
-            fh.write(b"ok")
-        os.remove(probe)
     except OSError as e:
         raise OutputError(f"--out: cannot write to {out_dir}: {e.strerror or e}") from None
 
