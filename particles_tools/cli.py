@@ -194,13 +194,17 @@ def _cmd_schema(args) -> int:
 
 def _cmd_chart(args) -> int:
     from .charts import ChartFailed, run_charts, selection
+    from .charts.plot import require_matplotlib
+    from .charts.workprec import require_scipy
     from .commands import output_folder
 
     try:
         which = selection(args.only, key="--only")
-    except ValueError as e:
+        require_matplotlib()
+        require_scipy()
+    except (ValueError, ImportError) as e:
         raise UserError(str(e)) from None
-    output_folder(args.out)
+    output_folder(args.out)  # (after every refusal above: a refused call leaves no folder)
     try:
         paths = run_charts(args.out, quick=args.quick, which=which, quiet=args.quiet)
     except ImportError as e:
