@@ -58,9 +58,8 @@ def writable_dir(out_dir: str, flag: str = "--out") -> None:
 
 def prepare_dir(out_dir: str, overwrite: bool) -> None:
     """Create ``out_dir`` (or check an existing one): refuse to overwrite frames without
-    ``overwrite``; with it, remove only the files this engine writes. Checks it is writable."""
-    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-        raise OutputError(f"--out: {out_dir} exists and is not a directory")
+    ``overwrite``; with it, remove only the files this engine writes. Checks it is writable
+    (``writable_dir``: a file there is refused there, before anything is removed)."""
     old = existing_outputs(out_dir) if os.path.isdir(out_dir) else []
     if old and not overwrite:
         raise OutputRefused(f"--out: {out_dir} already holds {len(old)} rendered file(s); "
