@@ -88,6 +88,35 @@ def test_a_run_of_steps_is_the_bytes_of_its_steps_one_launch_each():
         assert x.tobytes() == y.tobytes(), f
 
 
+def test_a_dead_slot_beside_live_ones_is_left_as_it_was():
+    """The lanes store every lane's end, then put back the lanes they did not take: a dead slot in
+    a block with live ones keeps its bytes, and each live slot steps as it does with its block's
+    neighbours alive (a slot's path depends on its own state only). Odd slots killed in one of two
+    equal pools, then 30 steps of the step kernel alone (no births to refill them)."""
+    a, b = bouncing(BLOCKED_FROM), bouncing(BLOCKED_FROM)
+    run(a, 0.15)
+    run(b, 0.15)
+    Sa, Sb = a.particles.state, b.particles.state
+    alive = Sb.particle_alive.to_numpy()
+    odd = np.arange(alive.size) % 2 == 1
+    live_odd = odd & (alive != 0)
+    assert live_odd.sum() > 1000  # blocks with dead and live slots, many of them moving
+    alive[odd] = 0
+    Sb.particle_alive.from_numpy(alive)
+    fields = ("particle_pos", "particle_vel", "particle_age")
+    before = {f: getattr(Sb, f).to_numpy() for f in fields}
+    t = a.t
+    for m in range(30):
+        for s in (a, b):
+            integrate.step_fixed(s.particles.integrator, np.float32(t + m * H), H)
+    even = ~odd
+    for f in fields:
+        x, y = getattr(Sa, f).to_numpy(), getattr(Sb, f).to_numpy()
+        assert y[live_odd].tobytes() == before[f][live_odd].tobytes(), f  # the killed slots unchanged
+        assert x[even].tobytes() == y[even].tobytes(), f  # their neighbours as with them alive
+    assert (Sa.particle_alive.to_numpy()[even] == Sb.particle_alive.to_numpy()[even]).all()
+
+
 @ti.kernel
 def _settle_and_locate(I: ti.template(), xa: ti.types.ndarray(), va: ti.types.ndarray(), xo: ti.types.ndarray(),
                        vo: ti.types.ndarray(), out: ti.types.ndarray(), h: ti.f32):
