@@ -134,9 +134,9 @@ def build_parser(extra=()) -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="measure the engine side by side with NumPy, scipy, bandwidth")
     b.add_argument("--quick", action="store_true", help="small sizes, for tests (figures that only show the code runs; most of the time goes to compiling)")
-    b.add_argument("--only", default=None,
-                   help="comma-separated sections: step, frame, effects, ode, startup, features, "
-                        "cloth, output, wedge, api")
+    from .bench import SECTIONS  # (standard library only: no Taichi at parse time)
+
+    b.add_argument("--only", default=None, help="comma-separated sections: " + ", ".join(SECTIONS))
     b.add_argument("--quiet", action="store_true", help="no progress display")
     b.set_defaults(func=_cmd_bench)
 

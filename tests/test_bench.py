@@ -131,3 +131,14 @@ def test_the_splat_is_timed_as_the_frame_launches_it(name, monkeypatch):
     assert n > 0 and t_splat > 0 and t_ref > 0
     assert calls and len(calls) % len(frame) == 0
     assert calls == frame * (len(calls) // len(frame)), (frame, calls[:4])
+
+
+def test_the_bench_help_names_every_section(capsys):
+    # `particles bench --help` lists what --only takes: every section, none left out
+    from particles_tools import cli
+
+    with pytest.raises(SystemExit):
+        cli.main(["bench", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    listed = text.split("comma-separated sections:")[1].split("--quiet")[0]
+    assert [s.strip() for s in listed.split(",")] == list(bench.SECTIONS)
