@@ -165,6 +165,9 @@ def test_small_launches_on_one_thread_compute_what_the_parallel_ones_do(monkeypa
                              {"name": "splash", "rate": 0.0, "lifetime": 2.0, "speed": [1.0, 2.0],
                               "spread": 45.0, "capacity": 150}],
                    colliders=[{"type": "plane", "restitution": 0.3, "friction": 0.5}])
+    from engine.particles import emitters
+
+    monkeypatch.setattr(emitters, "SERIAL_BIRTHS", 512)  # (so the burst's 800 births take both paths)
     real, taken = runtime.one_thread, []
 
     def run(serial_ok):

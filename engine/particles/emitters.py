@@ -27,8 +27,12 @@ CHUNK_MIN = 2048  # ... of at least this many slots each
 # parents × count, or its child segment's size if less) runs its loops on the launching thread
 # (engine.particles.spawn.spawn_children: ``serial``; ~0.2 µs a child written there)
 SERIAL_CHILDREN = 8192
-# a spawn launch of at most this many births runs its loops on the launching thread (``serial``)
-SERIAL_BIRTHS = 512
+# a spawn launch of at most this many births runs its loops on the launching thread (``serial``):
+# its four loops' hand-offs to the thread pool cost more than the second core saves, as far as
+# measured (the bench's step, kernel profiler over 50 steps, the launch's loops summed: 2,083
+# births at 1M 0.19 ms parallel, 0.125 serial; 8,333 at 4M 0.68-0.73 parallel, 0.55-0.56 serial;
+# 512 before, when these loops were slower: 6314f0b)
+SERIAL_BIRTHS = 8192
 
 
 @dataclass
