@@ -331,8 +331,8 @@ def test_sparks_bounce_off_a_tilted_rigid_box_and_a_capsule_named_as_the_bodies(
 def test_the_kept_pair_list_gives_the_broad_phases_pairs_at_every_step():
     # bodies drifting (some fast, some still), margins growing and shrinking, a body jumping far
     # and a NaN, given as arrays or as strided views: at every call the kept list gives exactly
-    # broad_phase's pairs and order, and it
-    # is rebuilt only now and then (the free-flight case it is for)
+    # broad_phase's pairs and order, and it is rebuilt only now and then (the free-flight case it
+    # is for)
     from engine.rigid import broad
 
     rng = np.random.default_rng(3)

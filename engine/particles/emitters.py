@@ -31,7 +31,7 @@ SERIAL_CHILDREN = 8192
 # its four loops' hand-offs to the thread pool cost more than the second core saves, as far as
 # measured (the bench's step, kernel profiler over 50 steps, the launch's loops summed: 2,083
 # births at 1M 0.19 ms parallel, 0.125 serial; 8,333 at 4M 0.68-0.73 parallel, 0.55-0.56 serial;
-# 512 before, when these loops were slower: 6314f0b)
+# 512 before, from 6314f0b, set for launches of a few births)
 SERIAL_BIRTHS = 8192
 
 
