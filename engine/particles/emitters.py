@@ -30,9 +30,10 @@ SERIAL_CHILDREN = 8192
 # a spawn launch of at most this many births runs its loops on the launching thread (``serial``):
 # its four loops' hand-offs to the thread pool cost more than the second core saves, as far as
 # measured (the bench's step, kernel profiler over 50 steps, the launch's loops summed: 2,083
-# births at 1M 0.19 ms parallel, 0.125 serial; 8,333 at 4M 0.68-0.73 parallel, 0.55-0.56 serial;
-# 512 before, from 6314f0b, set for launches of a few births)
-SERIAL_BIRTHS = 8192
+# births at 1M 0.18-0.20 ms parallel, 0.125 serial; 8,333-8,334 at 4M 0.67-0.75 parallel,
+# 0.56-0.57 serial). The limit is the largest count measured to gain, so the 4M step's respawn
+# is taken too; 512 before, from 6314f0b, set for launches of a few births.
+SERIAL_BIRTHS = 8334
 
 
 @dataclass
