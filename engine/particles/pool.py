@@ -105,20 +105,28 @@ class ParticleState:
         vec3 = lambda: ti.Vector.field(3, ti.f32, shape=n)  # noqa: E731
         scalar = lambda dtype: ti.field(dtype, shape=n)  # noqa: E731
         if self.blocked:
-            # What the step reads and writes, in blocks of LANES slots, each field's LANES values
-            # together (x of slots 4b..4b+3, then their y, ..., their alive flags: 144 bytes a
-            # block): the step over a block's slots side by side loads and stores whole vectors
+            # What the step reads and writes, in blocks of LANES slots: each component its own
+            # array of blocks (x of slots 4b..4b+3 together, y of them in the y array, ...), so
+            # the step over a block's slots side by side loads and stores whole 4-wide vectors
             # (engine.particles.integrate._step_lanes; a slot a field apart, the compiler cannot
-            # tell that slots 4b and 4b + 1 are neighbours in memory).
+            # tell that slots 4b and 4b + 1 are neighbours in memory). Not one block holding every
+            # component (x4, y4, z4, ... alive4: 144 bytes): there LLVM's SLP vectorizer packed a
+            # block's neighbouring x and y values into 8-wide vectors for the bound test and
+            # moved single elements between them and the 4-wide z ones (an earlier reading of the
+            # compiled step; split, there is no x next to a y to pack, and the assembly was not
+            # read again). Split, the same bytes
+            # (the bench's 1M pool, 200 steps with and without the plane, every 7th slot dead:
+            # every field equal) and the same cold compile (6.7 s); `particles bench --only step`,
+            # alternating processes, 2026-12-04: the fused kernel 4M 10.9/10.7 -> 8.7/8.7 ms,
+            # 1M 2.39/2.31 -> 2.19/2.19; the 1M frame's step 6.5 -> 4.2 ms.
             self.particle_pos, self.particle_vel = ti.Vector.field(3, ti.f32), ti.Vector.field(3, ti.f32)
             self.particle_age, self.particle_life = ti.field(ti.f32), ti.field(ti.f32)
             self.particle_alive = ti.field(ti.i32)
-            block = ti.root.dense(ti.i, n // LANES)
             for f in (self.particle_pos, self.particle_vel):
                 for c in range(3):
-                    block.dense(ti.i, LANES).place(f.get_scalar_field(c))
+                    ti.root.dense(ti.i, n // LANES).dense(ti.i, LANES).place(f.get_scalar_field(c))
             for f in (self.particle_age, self.particle_life, self.particle_alive):
-                block.dense(ti.i, LANES).place(f)
+                ti.root.dense(ti.i, n // LANES).dense(ti.i, LANES).place(f)
         else:
             self.particle_pos, self.particle_vel = vec3(), vec3()
             self.particle_age, self.particle_life = scalar(ti.f32), scalar(ti.f32)
