@@ -113,12 +113,12 @@ class ParticleState:
             # component (x4, y4, z4, ... alive4: 144 bytes): there LLVM's SLP vectorizer packed a
             # block's neighbouring x and y values into 8-wide vectors for the bound test and
             # moved single elements between them and the 4-wide z ones (an earlier reading of the
-            # compiled step; split, there is no x next to a y to pack, and the assembly was not
-            # read again). Split, the same bytes
-            # (the bench's 1M pool, 200 steps with and without the plane, every 7th slot dead:
-            # every field equal) and the same cold compile (6.7 s); `particles bench --only step`,
-            # alternating processes, 2026-12-04: the fused kernel 4M 10.9/10.7 -> 8.7/8.7 ms,
-            # 1M 2.39/2.31 -> 2.19/2.19; the 1M frame's step 6.5 -> 4.2 ms.
+            # compiled step; split, there is no x next to a y to pack; the assembly was not read
+            # again). The same bytes (the bench's 1M pool, 200 steps with and without the plane,
+            # every 7th slot dead: every field equal) and the same cold compile (6.7 s); the
+            # bench's fused step kernel (`particles bench --only step`, alternating processes,
+            # 2026-12-04) 4M 10.9/10.7 -> 8.7/8.7 ms, 1M 2.39/2.31 -> 2.19/2.19, and the 1M
+            # frame's step (`--only frame`) 6.5 -> 4.2 ms.
             self.particle_pos, self.particle_vel = ti.Vector.field(3, ti.f32), ti.Vector.field(3, ti.f32)
             self.particle_age, self.particle_life = ti.field(ti.f32), ti.field(ti.f32)
             self.particle_alive = ti.field(ti.i32)
