@@ -30,17 +30,42 @@ def bouncing(capacity: int, **extra):
     return sim_scene(d)
 
 
+SMALL, BIG = BLOCKED_FROM - 1, BLOCKED_FROM + 1  # the largest pool stepped a slot at a time, and the
+# smallest in lanes (+1: a last block of one slot and three of padding)
+_BUILT = {}
+
+
+def fresh(capacity: int):
+    """``bouncing(capacity)`` as built: one scene per capacity for this file's tests, put back to
+    its build's state by ``Scene.reset`` (the same bytes as a fresh build, kernels kept). A
+    second scene of the same config compiles its step kernels again (they are specialised per
+    scene): ~55 s a scene on a 2-core AMD EPYC of Zen 1 with the kernel cache cold, and this
+    file's tests took 4.5 minutes of a worker when each built its own."""
+    if capacity in _BUILT:
+        _BUILT[capacity].reset()
+    else:
+        _BUILT[capacity] = bouncing(capacity)
+    return _BUILT[capacity]
+
+
+def state_bytes(scene):
+    """The pool's position, velocity, age and alive fields, as bytes."""
+    S = scene.particles.state
+    return {f: getattr(S, f).to_numpy().tobytes()
+            for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive")}
+
+
 def run(scene, seconds: float):
     for _ in range(round(seconds / H)):
         scene.advance(H)
 
 
 def test_pools_from_the_threshold_are_blocked_and_stepped_in_lanes():
-    small, big = bouncing(BLOCKED_FROM - 1), bouncing(BLOCKED_FROM + 1)  # (+1: a last block of one slot)
+    small, big = fresh(SMALL), fresh(BIG)
     assert not small.particles.state.blocked and not small.particles.integrator.lanes
     S, I = big.particles.state, big.particles.integrator
-    assert S.blocked and I.lanes and I.blocks == lanes_of(BLOCKED_FROM + 1) // LANES
-    assert S.particle_pos.shape == (lanes_of(BLOCKED_FROM + 1),) and lanes_of(BLOCKED_FROM + 1) % LANES == 0
+    assert S.blocked and I.lanes and I.blocks == lanes_of(BIG) // LANES
+    assert S.particle_pos.shape == (lanes_of(BIG),) and lanes_of(BIG) % LANES == 0
     run(big, 0.2)
     alive = S.particle_alive.to_numpy()
     assert alive[: big.particles.layout.capacity].sum() == big.particles.count_alive() > 3000
@@ -58,7 +83,7 @@ def test_lanes_step_what_the_slot_at_a_time_step_does():
     same arithmetic per slot, vector instructions in one; 1.8 s of bounces on a plane and a
     sphere: 1.9e-5 m and 8.2e-5 m/s apart at most, 2026-12-02), with the same births, deaths and
     contacts."""
-    a, b = bouncing(BLOCKED_FROM - 3), bouncing(BLOCKED_FROM + 3)
+    a, b = fresh(SMALL), fresh(BIG)
     assert not a.particles.integrator.lanes and b.particles.integrator.lanes  # the two paths compared
     for _ in range(round(1.8 / H)):
         a.advance(H)
@@ -76,45 +101,53 @@ def test_lanes_step_what_the_slot_at_a_time_step_does():
 
 
 def test_a_run_of_steps_is_the_bytes_of_its_steps_one_launch_each():
-    a, b = bouncing(BLOCKED_FROM), bouncing(BLOCKED_FROM)
+    """One scene twice from its build (``fresh``): 12 steps a launch each, then as one run."""
+    a = fresh(BIG)
     run(a, 0.5)
-    run(b, 0.5)
-    t = a.t
+    t, start = a.t, state_bytes(a)
     for m in range(12):
         integrate.step_fixed(a.particles.integrator, np.float32(t + m * H), H)
+    steps = state_bytes(a)
+    b = fresh(BIG)
+    run(b, 0.5)
+    assert b.t == t and state_bytes(b) == start  # the same state before both
     integrate.step_fixed_run(b.particles.integrator, t, H, 0, 12)
-    for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive"):
-        x, y = (getattr(s.particles.state, f).to_numpy() for s in (a, b))
-        assert x.tobytes() == y.tobytes(), f
+    for f, got in state_bytes(b).items():
+        assert got == steps[f], f
 
 
 def test_a_dead_slot_beside_live_ones_is_left_as_it_was():
     """The lanes store every lane's end, then put back the lanes they did not take: a dead slot in
     a block with live ones keeps its bytes, and each live slot steps as it does with its block's
     neighbours alive (a slot's path depends on its own state only). Odd slots killed in one of two
-    equal pools, then 30 steps of the step kernel alone (no births to refill them)."""
-    a, b = bouncing(BLOCKED_FROM), bouncing(BLOCKED_FROM)
+    equal pools (one scene twice from its build: ``fresh``), then 30 steps of the step kernel
+    alone (no births to refill them)."""
+    fields = ("particle_pos", "particle_vel", "particle_age", "particle_alive")
+    a = fresh(BIG)
     run(a, 0.15)
+    t, start = a.t, state_bytes(a)
+    for m in range(30):
+        integrate.step_fixed(a.particles.integrator, np.float32(t + m * H), H)
+    x_all = {f: getattr(a.particles.state, f).to_numpy() for f in fields}
+    b = fresh(BIG)
     run(b, 0.15)
-    Sa, Sb = a.particles.state, b.particles.state
+    assert b.t == t and state_bytes(b) == start
+    Sb = b.particles.state
     alive = Sb.particle_alive.to_numpy()
     odd = np.arange(alive.size) % 2 == 1
     live_odd = odd & (alive != 0)
     assert live_odd.sum() > 1000  # blocks with dead and live slots, many of them moving
     alive[odd] = 0
     Sb.particle_alive.from_numpy(alive)
-    fields = ("particle_pos", "particle_vel", "particle_age")
-    before = {f: getattr(Sb, f).to_numpy() for f in fields}
-    t = a.t
+    before = {f: getattr(Sb, f).to_numpy() for f in fields[:3]}
     for m in range(30):
-        for s in (a, b):
-            integrate.step_fixed(s.particles.integrator, np.float32(t + m * H), H)
+        integrate.step_fixed(b.particles.integrator, np.float32(t + m * H), H)
     even = ~odd
-    for f in fields:
-        x, y = getattr(Sa, f).to_numpy(), getattr(Sb, f).to_numpy()
+    for f in fields[:3]:
+        x, y = x_all[f], getattr(Sb, f).to_numpy()
         assert y[live_odd].tobytes() == before[f][live_odd].tobytes(), f  # the killed slots unchanged
         assert x[even].tobytes() == y[even].tobytes(), f  # their neighbours as with them alive
-    assert (Sa.particle_alive.to_numpy()[even] == Sb.particle_alive.to_numpy()[even]).all()
+    assert (x_all["particle_alive"][even] == Sb.particle_alive.to_numpy()[even]).all()
 
 
 @ti.kernel
@@ -141,7 +174,7 @@ def test_settled_steps_are_the_located_steps_answers():
     end, or a plane's held contact (then the located step reports that plane). Over steps near,
     along and onto a ground plane and a sphere, resting points included; most of them are
     settled: the points at rest on the ground, and those that skim it without a contact."""
-    s = bouncing(BLOCKED_FROM)
+    s = fresh(BIG)
     I = s.particles.integrator
     rng = np.random.default_rng(3)
     n, h = 240_000, np.float32(H)
