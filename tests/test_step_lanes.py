@@ -48,11 +48,13 @@ def fresh(capacity: int):
     return _BUILT[capacity]
 
 
+FIELDS = ("particle_pos", "particle_vel", "particle_age", "particle_alive")  # a pool's stepped state
+
+
 def state_bytes(scene):
-    """The pool's position, velocity, age and alive fields, as bytes."""
+    """The pool's FIELDS, as bytes."""
     S = scene.particles.state
-    return {f: getattr(S, f).to_numpy().tobytes()
-            for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive")}
+    return {f: getattr(S, f).to_numpy().tobytes() for f in FIELDS}
 
 
 def run(scene, seconds: float):
@@ -122,13 +124,12 @@ def test_a_dead_slot_beside_live_ones_is_left_as_it_was():
     neighbours alive (a slot's path depends on its own state only). Odd slots killed in one of two
     equal pools (one scene twice from its build: ``fresh``), then 30 steps of the step kernel
     alone (no births to refill them)."""
-    fields = ("particle_pos", "particle_vel", "particle_age", "particle_alive")
     a = fresh(BIG)
     run(a, 0.15)
     t, start = a.t, state_bytes(a)
     for m in range(30):
         integrate.step_fixed(a.particles.integrator, np.float32(t + m * H), H)
-    x_all = {f: getattr(a.particles.state, f).to_numpy() for f in fields}
+    x_all = {f: getattr(a.particles.state, f).to_numpy() for f in FIELDS}
     b = fresh(BIG)
     run(b, 0.15)
     assert b.t == t and state_bytes(b) == start
@@ -139,11 +140,12 @@ def test_a_dead_slot_beside_live_ones_is_left_as_it_was():
     assert live_odd.sum() > 1000  # blocks with dead and live slots, many of them moving
     alive[odd] = 0
     Sb.particle_alive.from_numpy(alive)
-    before = {f: getattr(Sb, f).to_numpy() for f in fields[:3]}
+    moved = FIELDS[:3]  # (not the alive flags, which the test set)
+    before = {f: getattr(Sb, f).to_numpy() for f in moved}
     for m in range(30):
         integrate.step_fixed(b.particles.integrator, np.float32(t + m * H), H)
     even = ~odd
-    for f in fields[:3]:
+    for f in moved:
         x, y = x_all[f], getattr(Sb, f).to_numpy()
         assert y[live_odd].tobytes() == before[f][live_odd].tobytes(), f  # the killed slots unchanged
         assert x[even].tobytes() == y[even].tobytes(), f  # their neighbours as with them alive
@@ -206,12 +208,12 @@ import hashlib, sys
 sys.path[:0] = [".", "tests"]
 from engine import runtime
 runtime.init("cpu", threads=int(sys.argv[1]))
-from test_step_lanes import bouncing, run
+from test_step_lanes import FIELDS, bouncing, run
 from engine.particles.pool import BLOCKED_FROM
 s = bouncing(BLOCKED_FROM + 2)
 run(s, 0.6)
 h = hashlib.sha256()
-for f in ("particle_pos", "particle_vel", "particle_age", "particle_alive"):
+for f in FIELDS:
     h.update(getattr(s.particles.state, f).to_numpy().tobytes())
 print(h.hexdigest(), s.particles.count_alive())
 """
